@@ -1,0 +1,1 @@
+"""The paper's design layer (Lemma 2, observer gains, controller gains)."""
