@@ -25,6 +25,9 @@ __all__ = [
     "projector",
     "projector_distance",
     "contains",
+    "STABILITY_TOL",
+    "stable_mask",
+    "is_hurwitz",
 ]
 
 #: Relative tolerance used for rank decisions when none is given. Chosen well
@@ -145,3 +148,23 @@ def contains(X: np.ndarray, Y: np.ndarray, tol: float = 1e-8) -> bool:
     Q = orth(X)
     res = Y - Q @ (Q.T @ Y)
     return bool(np.linalg.norm(res) <= tol * max(1.0, np.linalg.norm(Y)))
+
+
+#: An eigenvalue counts as stable only when ``Re(lambda) < -STABILITY_TOL * max(1, |A|)``.
+#: Marginal modes (integrators, imaginary-axis pairs) are therefore *not* stable,
+#: as Lemma 2 / Table I require for (strong) detectability.
+STABILITY_TOL = 1e-8
+
+
+def stable_mask(eigenvalues: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Boolean mask of eigenvalues that are strictly stable (see :data:`STABILITY_TOL`)."""
+    ev = np.asarray(eigenvalues)
+    return ev.real < -STABILITY_TOL * max(1.0, float(scale))
+
+
+def is_hurwitz(M: np.ndarray) -> bool:
+    """True when every eigenvalue of the square matrix ``M`` is strictly stable."""
+    M = np.asarray(M, dtype=float)
+    if M.size == 0:
+        return True
+    return bool(np.all(stable_mask(np.linalg.eigvals(M), np.linalg.norm(M, 2))))

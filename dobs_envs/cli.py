@@ -1,0 +1,44 @@
+"""``dobs-envs`` command line: one sub-command per job.
+
+Sub-commands live next to the code they drive and register themselves through an
+``add_parser(subparsers)`` function:
+
+- ``reproduce``  -> :mod:`dobs_envs.reproduce` (the paper's numerical examples)
+- ``train``, ``evaluate``, ``benchmark`` -> :mod:`agents.cli` (needs the ``rl`` extra)
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+_SUBCOMMAND_MODULES = ("dobs_envs.reproduce", "agents.cli")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="dobs-envs",
+        description="Distributed-observer control benchmark (Cao & Yin).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in _SUBCOMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ImportError as exc:  # e.g. the rl extra is not installed
+            missing = getattr(exc, "name", None) or str(exc)
+            stub = sub.add_parser(name.rsplit(".", 1)[-1], help=f"unavailable: {missing}")
+            stub.set_defaults(func=lambda args, _m=missing: sys.exit(f"dobs-envs: missing dependency {_m}; install dobs-envs[rl]"))
+            continue
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    result = args.func(args)
+    return int(result or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
