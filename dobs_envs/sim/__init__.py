@@ -1,0 +1,5 @@
+"""Closed-loop simulation core (plant, exosystem, reference model, distributed observers)."""
+from .core import BACKENDS, estimates, estimation_errors, outputs, step_env
+from .state import SimParams, SimState
+
+__all__ = ["SimParams", "SimState", "step_env", "estimates", "outputs", "estimation_errors", "BACKENDS"]

@@ -1,0 +1,143 @@
+"""numba-compiled control period: the hot path of every environment.
+
+Same arithmetic, in the same order of terms, as :func:`.numpy_step.control_period_numpy`
+(see its docstring for the equations); the two are tested against each other.
+Arrays are updated in place on copies made by :func:`control_period_compiled`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+try:  # numba is a hard dependency, but keep the package importable without it
+    import numba
+
+    _njit = numba.njit(cache=True, fastmath=True, nogil=True, error_model="numpy")
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    HAVE_NUMBA = False
+
+    def _njit(f):
+        return f
+
+
+__all__ = ["HAVE_NUMBA", "control_period_compiled"]
+
+
+@_njit
+def _control_period(x, z, gamma, gamma_s, v, x_r, u, r,
+                    A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, P_u, lap, A_r,
+                    phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference):
+    nb, N, n = z.shape
+    p = C.shape[1]
+    m = B.shape[1]
+    mv = B_v.shape[1]
+    y = np.empty((N, p))
+    xhat = np.empty((N, n))
+    d = np.empty((N, n))
+    w = np.empty(n)
+    bu = np.empty((N, n))
+    Bu = np.empty(n)
+    Br = np.empty(n)
+    znew = np.empty(n)
+    xdot = np.empty(n)
+    xrdot = np.empty(n)
+    vnew = np.empty(mv)
+    for b in range(nb):
+        # held inputs (ZOH over the control period)
+        for i in range(N):
+            for k in range(n):
+                s = 0.0
+                for j in range(m):
+                    s += B_bar[i, k, j] * u[b, j]
+                bu[i, k] = s
+        for k in range(n):
+            s = 0.0
+            s2 = 0.0
+            for j in range(m):
+                s += B[k, j] * u[b, j]
+                s2 += B[k, j] * r[b, j]
+            Bu[k] = s
+            Br[k] = s2
+        for _ in range(substeps):
+            # y_i = C_i x ; xhat_i = z_i + Gbar_i y_i
+            for i in range(N):
+                for q in range(p):
+                    s = 0.0
+                    for k in range(n):
+                        s += C[i, q, k] * x[b, k]
+                    y[i, q] = s
+                for k in range(n):
+                    s = z[b, i, k]
+                    for q in range(p):
+                        s += G_bar[i, k, q] * y[i, q]
+                    xhat[i, k] = s
+            # d = L xhat
+            for i in range(N):
+                for k in range(n):
+                    s = 0.0
+                    for j in range(N):
+                        s += lap[i, j] * xhat[j, k]
+                    d[i, k] = s
+            for i in range(N):
+                nw2 = 0.0
+                for k in range(n):
+                    s = 0.0
+                    for l in range(n):
+                        s += P_u[i, k, l] * d[i, l]
+                    w[k] = s
+                    nw2 += s * s
+                nw = np.sqrt(nw2)
+                g = gamma[b, i]
+                gs = gamma_s[b, i]
+                coef = g + (gs / nw if nw > 0.0 else 0.0)
+                for k in range(n):
+                    s = bu[i, k] - coef * w[k]
+                    for l in range(n):
+                        s += E_bar[i, k, l] * z[b, i, l]
+                    for q in range(p):
+                        s += F_bar[i, k, q] * y[i, q]
+                    znew[k] = z[b, i, k] + dt * s
+                for k in range(n):
+                    z[b, i, k] = znew[k]
+                gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2)
+                gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nw)
+            # plant and reference model
+            for k in range(n):
+                s = Bu[k]
+                for l in range(n):
+                    s += A[k, l] * x[b, l]
+                for j in range(mv):
+                    s += B_v[k, j] * v[b, j]
+                xdot[k] = s
+            if has_reference:
+                for k in range(n):
+                    s = Br[k]
+                    for l in range(n):
+                        s += A_r[k, l] * x_r[b, l]
+                    xrdot[k] = s
+                for k in range(n):
+                    x_r[b, k] += dt * xrdot[k]
+            for k in range(n):
+                x[b, k] += dt * xdot[k]
+            for j in range(mv):
+                s = 0.0
+                for l in range(mv):
+                    s += Phi_v[j, l] * v[b, l]
+                vnew[j] = s
+            for j in range(mv):
+                v[b, j] = vnew[j]
+
+
+def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
+    """Compiled counterpart of :func:`control_period_numpy` (same signature)."""
+    x = np.array(x, dtype=np.float64, order="C")
+    z = np.array(z, dtype=np.float64, order="C")
+    gamma = np.array(gamma, dtype=np.float64, order="C")
+    gamma_s = np.array(gamma_s, dtype=np.float64, order="C")
+    v = np.array(v, dtype=np.float64, order="C")
+    x_r = np.array(x_r, dtype=np.float64, order="C")
+    _control_period(x, z, gamma, gamma_s, v, x_r,
+                    np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
+                    p.A, p.B, p.B_v, p.C, p.E_bar, p.F_bar, p.G_bar, p.B_bar, p.P_u, p.laplacian, p.A_r,
+                    p.phi, p.phi_s, p.sigma, p.sigma_s, p.Phi_v, p.dt, p.substeps, p.has_reference)
+    return x, z, gamma, gamma_s, v, x_r
