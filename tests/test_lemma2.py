@@ -1,0 +1,389 @@
+"""Lemma 2 (FUIO): the Appendix algorithm in dobs_envs.design.lemma2.
+
+Tolerances
+----------
+* Residuals of the two defining equations are relative (see
+  ``lemma2_residuals``: divided by the norms of the summands that cancel).
+  Every quantity is a product of a handful of orthogonal factors and one
+  triangular solve, so round-off gives ~1e-15; 1e-9 (the contract) leaves six
+  orders of magnitude for the conditioning of the random systems.
+* The paper prints ``T_id`` with 4 digits (0.7071 = 1/sqrt(2) - 6.8e-6), so the
+  projector distance to the printed values can be ~1e-5; we allow 1e-3.
+* Comparisons between two exact computations of the same subspace (scaling,
+  reference characterisation) use 1e-6: rank decisions are at 1e-9 relative,
+  and subspace angles are perturbed by ~eps / gap with gaps >= ~1e-6 on the
+  random systems used here.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dobs_envs.design.lemma2 import StrongDetectability, lemma2_residuals, strong_detectability
+from dobs_envs.design.subspaces import is_hurwitz, null_space, orth, projector_distance
+
+RES_TOL = 1e-9
+PAPER_TOL = 1e-3
+EXACT_TOL = 1e-6
+
+
+# ---------------------------------------------------------------------------
+# paper data (Section V-B, NE2; Section VI-B, NE3)
+# ---------------------------------------------------------------------------
+def ne2_data():
+    A = np.zeros((9, 9))
+    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
+        A[i, j] = 1.0
+    e = np.eye(9)
+    chans = [
+        e[:, [1]],  # B^1
+        e[:, [3]],  # B^2
+        e[:, [0]] + e[:, [4]] + e[:, [5]],  # B^3
+        e[:, [2]] + e[:, [8]],  # B^4
+        e[:, [0]],  # B^5
+    ]
+    C = [e[[0]], e[[2]], e[[4]], e[[6]], e[[1]], e[[3]]]  # C_1 .. C_6
+    known = [0, 1, 2, 3, 4, 4]  # node i knows channel i (i=1..5), node 6 knows channel 5
+    B_minus = [np.hstack([chans[k] for k in range(5) if k != known[i]]) for i in range(6)]
+    return A, chans, C, B_minus
+
+
+PAPER_T_NE2 = [
+    [[1, 0, 0, 0, 0, 0, 0, 0, 0]],
+    [
+        [0, 0, 0, 0, 0, 0, 0.5, -0.7071, 0.5],
+        [0, 0, 0, -0.7071, 0, 0, 0.5, 0, -0.5],
+        [0, 0, -1, 0, 0, 0, 0, 0, 0],
+    ],
+    [[0, 0, 0, 0, 0, -1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0, 0, 0]],
+    [[0, 0, 0, 0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, -1, 0, 0]],
+    [[0, 1, 0, 0, 0, 0, 0, 0, 0]],
+    [[0, 0, 0, 1, 0, 0, 0, 0, 0]],
+]
+
+
+def check_contract(A, B, C, res: StrongDetectability):
+    """Every property promised by strong_detectability; returns max residual."""
+    n, p = A.shape[0], C.shape[0]
+    d = res.delta
+    assert res.T_d.shape == (n, d) and res.T_u.shape == (n, n - d)
+    assert res.E.shape == (d, d) and res.F.shape == (d, p) and res.G.shape == (d, p)
+    # eq. (TidTiu)
+    np.testing.assert_allclose(res.T_d.T @ res.T_d, np.eye(d), atol=1e-12)
+    np.testing.assert_allclose(res.T_u.T @ res.T_u, np.eye(n - d), atol=1e-12)
+    np.testing.assert_allclose(res.T_d.T @ res.T_u, np.zeros((d, n - d)), atol=1e-12)
+    np.testing.assert_allclose(res.T_u @ res.T_u.T, np.eye(n) - res.T_d @ res.T_d.T, atol=1e-12)
+    rB, rA = lemma2_residuals(A, B, C, res)
+    assert rB <= RES_TOL and rA <= RES_TOL, (rB, rA)
+    if d:
+        if np.all(res.E == 0):
+            # E = 0 branch: T_d^T = G C, F = 0 (proof of Theorem 1)
+            np.testing.assert_allclose(res.G @ C, res.T_d.T, atol=1e-10 * max(1.0, np.linalg.norm(res.G)))
+            assert np.all(res.F == 0)
+        else:
+            assert is_hurwitz(res.E)
+    # the row space of C is always reconstructible (T = C, G = I, E = 0)
+    assert projector_distance(np.hstack([res.T_d, C.T]), res.T_d) <= EXACT_TOL
+    return max(rB, rA)
+
+
+# ---------------------------------------------------------------------------
+# independent reference: geometric characterisation (minimal conditioned
+# invariant subspace S*, quotient pair, undetectable modes). Written here from
+# scratch so that it shares no code path with lemma2.py.
+# ---------------------------------------------------------------------------
+def reference_subspace(A, B, C):
+    n = A.shape[0]
+    B = orth(B) if B.size else np.zeros((n, 0))
+    S = B
+    for _ in range(n + 1):
+        SK = S @ null_space(C @ S) if S.shape[1] else S
+        S_new = orth(np.hstack([B, A @ SK])) if (B.shape[1] or SK.shape[1]) else np.zeros((n, 0))
+        if S_new.shape[1] == S.shape[1]:
+            break
+        S = S_new
+    N = null_space(S.T).T if S.shape[1] else np.eye(n)  # rows: basis of S*^perp
+    q = N.shape[0]
+    if q == 0:
+        return orth(C.T)
+    M = np.vstack([N, C])
+    EF = np.linalg.lstsq(M.T, (N @ A).T, rcond=None)[0].T
+    E0 = EF[:, :q]
+    rel = null_space(M.T)  # columns (h, g): h N + g C = 0
+    H = orth(rel[:q]).T if rel.size else np.zeros((0, q))
+    # unobservable subspace of (E0, H)
+    obs = np.vstack([H @ np.linalg.matrix_power(E0, k) for k in range(q)]) if H.shape[0] else np.zeros((0, q))
+    U = null_space(obs) if obs.shape[0] else np.eye(q)
+    if U.shape[1]:
+        Au = U.T @ E0 @ U
+        _, Z, sdim = sla.schur(Au, output="real", sort=lambda re, im: re >= -1e-8)
+        Uu = U @ Z[:, :sdim]
+    else:
+        Uu = np.zeros((q, 0))
+    Pd = null_space(Uu.T) if Uu.shape[1] else np.eye(q)
+    return orth(np.hstack([(Pd.T @ N).T, C.T]))
+
+
+# ---------------------------------------------------------------------------
+# paper examples
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("i", range(6))
+def test_ne2_matches_paper(i):
+    A, _, C, Bm = ne2_data()
+    res = strong_detectability(A, Bm[i], C[i])
+    check_contract(A, Bm[i], C[i], res)
+    paper = np.array(PAPER_T_NE2[i], dtype=float).T
+    assert res.delta == paper.shape[1]
+    assert projector_distance(res.T_d, paper) <= PAPER_TOL
+
+
+@pytest.mark.parametrize("i", range(6))
+def test_ne3_matches_paper(i):
+    """NE3: B_v = [B^1 B^2] is unknown to every node; T_2d = e3, others as NE2."""
+    A, chans, C, Bm = ne2_data()
+    B = np.hstack([Bm[i], chans[0], chans[1]])  # redundant columns for nodes 3..6
+    res = strong_detectability(A, B, C[i])
+    check_contract(A, B, C[i], res)
+    paper = np.eye(9)[:, [2]] if i == 1 else np.array(PAPER_T_NE2[i], dtype=float).T
+    assert res.delta == paper.shape[1]
+    assert projector_distance(res.T_d, paper) <= PAPER_TOL
+
+
+def test_ne2_collectively_strongly_detectable():
+    """Assumption 6 holds for NE2: sum of Im T_id = R^9."""
+    A, _, C, Bm = ne2_data()
+    Ts = np.hstack([strong_detectability(A, Bm[i], C[i]).T_d for i in range(6)])
+    assert np.linalg.matrix_rank(Ts) == 9
+
+
+def test_ne2_node1_is_E_zero_branch():
+    A, _, C, Bm = ne2_data()
+    res = strong_detectability(A, Bm[0], C[0])
+    assert res.delta == 1 and np.all(res.E == 0) and np.all(res.F == 0)
+    np.testing.assert_allclose(res.G @ C[0], res.T_d.T, atol=1e-14)
+
+
+# ---------------------------------------------------------------------------
+# small analytic cases
+# ---------------------------------------------------------------------------
+def test_no_unknown_input_gives_detectable_subspace():
+    # x1 unstable observed, x2 stable unobserved (reconstructible: z' = -z),
+    # x3 integrator unobserved (not reconstructible), x4 measured-through coupling
+    A = np.array([[1.0, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 0], [1, 0, 0, -2]])
+    C = np.array([[0.0, 0, 0, 1]])
+    res = strong_detectability(A, np.zeros((4, 0)), C)
+    check_contract(A, np.zeros((4, 0)), C, res)
+    assert projector_distance(res.T_d, np.eye(4)[:, [0, 1, 3]]) <= EXACT_TOL
+
+
+def test_double_integrator_reconstructs_only_position():
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    B = np.array([[0.0], [1.0]])
+    C = np.array([[1.0, 0.0]])
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == 1
+    assert abs(abs(res.T_d[0, 0]) - 1.0) <= 1e-12
+    assert np.all(res.E == 0)
+
+
+def test_uncoupled_integrator_is_not_reconstructible():
+    A = np.diag([0.0, -1.0])
+    C = np.array([[0.0, 1.0]])
+    res = strong_detectability(A, np.zeros((2, 0)), C)
+    assert projector_distance(res.T_d, np.eye(2)[:, [1]]) <= EXACT_TOL
+    # an imaginary-axis pair is marginal too
+    A = sla.block_diag([[0.0, 2.0], [-2.0, 0.0]], [[-1.0]])
+    C = np.array([[0.0, 0.0, 1.0]])
+    res = strong_detectability(A, np.zeros((3, 0)), C)
+    assert projector_distance(res.T_d, np.eye(3)[:, [2]]) <= EXACT_TOL
+
+
+def test_integrator_chain_hidden_by_unknown_input():
+    """5-chain of integrators (defective eigenvalue 0, as in NE2) that is
+    unobservable: its computed eigenvalues spread to |Re| ~ 1e-3 after an
+    orthogonal change of basis and must still be classified marginal."""
+    rng = np.random.default_rng(3)
+    A = sla.block_diag(np.diag(np.ones(4), 1), [[-1.0]])
+    C = np.eye(6)[[5]]
+    Q = np.linalg.qr(rng.standard_normal((6, 6)))[0]
+    At, Ct = Q.T @ A @ Q, C @ Q
+    res = strong_detectability(At, np.zeros((6, 0)), Ct)
+    check_contract(At, np.zeros((6, 0)), Ct, res)
+    assert projector_distance(res.T_d, Q.T[:, [5]]) <= EXACT_TOL
+
+
+def test_stable_states_combined_with_outputs_r_d_le_p():
+    """Paper step 7 with r_d <= p would return T = C and drop x1 (deviation 1)."""
+    A = np.diag([-1.0, 0.0])
+    B = np.array([[0.0], [1.0]])
+    C = np.array([[0.0, 1.0]])
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == 2
+    assert is_hurwitz(res.E)
+
+
+def test_stable_states_combined_with_outputs_r_d_gt_p():
+    """Paper step 7 with r_d > p would drop the measured x3 (deviation 1)."""
+    A = np.diag([-1.0, -2.0, 0.0])
+    A[0, 1] = 1.0
+    B = np.array([[0.0], [0.0], [1.0]])
+    C = np.array([[0.0, 0.0, 1.0]])
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == 3
+
+
+def test_unstable_zero_dynamics_not_reconstructible():
+    """x1' = x1 + x2, x2' = u, y = x2: the unknown input hides nothing in y but
+    x1 is driven by y; x1 is unstable and unobservable -> only y."""
+    A = np.array([[1.0, 1.0], [0.0, 0.0]])
+    B = np.array([[0.0], [1.0]])
+    C = np.array([[0.0, 1.0]])
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert projector_distance(res.T_d, np.eye(2)[:, [1]]) <= EXACT_TOL
+    # same with a stable x1: z' = -z + y reconstructs x1
+    A[0, 0] = -1.0
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == 2
+
+
+def test_scale_invariance_and_margin():
+    A, _, C, Bm = ne2_data()
+    r1 = strong_detectability(A, Bm[1], C[1])
+    r2 = strong_detectability(1e3 * A, 7.0 * Bm[1], 0.01 * C[1])
+    assert projector_distance(r1.T_d, r2.T_d) <= EXACT_TOL
+    check_contract(1e3 * A, 7.0 * Bm[1], 0.01 * C[1], r2)
+    # Node 2 has a fixed (unobservable, stable) pair -1/sqrt(2) (1 +- i) that no
+    # J_2 moves; the assignable eigenvalue respects the ARE shift `margin`.
+    fixed = np.array([-1 + 1j, -1 - 1j]) / np.sqrt(2)
+    for margin in (0.2, 2.0):
+        ev = np.linalg.eigvals(strong_detectability(A, Bm[1], C[1], margin=margin).E)
+        is_fixed = np.min(np.abs(ev[:, None] - fixed[None, :]), axis=1) < 1e-8
+        assert is_fixed.sum() == 2
+        assert np.all(ev[~is_fixed].real < -margin)
+
+
+def test_inputs_not_mutated_and_result_frozen():
+    A, _, C, Bm = ne2_data()
+    A0, B0, C0 = A.copy(), Bm[1].copy(), C[1].copy()
+    res = strong_detectability(A, Bm[1], C[1])
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(Bm[1], B0)
+    np.testing.assert_array_equal(C[1], C0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.E = np.zeros((3, 3))  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        res.T_d[0, 0] = 1.0
+
+
+# ---------------------------------------------------------------------------
+# random systems
+# ---------------------------------------------------------------------------
+def random_system(seed, n, p, m, kind):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((n, n))
+    if kind == "blocks":
+        # decoupled stable / marginal / unstable parts, rotated: exercises the
+        # detectability decomposition and deviation 1
+        diag = rng.choice([-2.0, -0.5, 0.0, 0.7], size=n)
+        A = np.diag(diag) + np.triu(rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.3), 1)
+        Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+        A = Q.T @ A @ Q
+    C = rng.standard_normal((p, n))
+    if kind == "blocks":
+        C = C * (rng.random((p, n)) < 0.5) + np.eye(n)[rng.choice(n, size=p, replace=False)]
+        C = C @ Q
+    if m == 0:
+        B = np.zeros((n, 0))
+    elif kind == "redundant":
+        k = max(1, m - 1)
+        B = rng.standard_normal((n, k)) @ rng.standard_normal((k, m + 1))  # rank k, m+1 columns
+    elif kind == "zero_cols":
+        B = np.hstack([rng.standard_normal((n, m)), np.zeros((n, 2))])
+    else:
+        B = rng.standard_normal((n, m))
+        if kind == "blocks":
+            B = Q.T @ (B * (rng.random((n, m)) < 0.4))
+    return A, B, C
+
+
+systems = st.tuples(
+    st.integers(0, 2**32 - 1),
+    st.integers(2, 7),
+    st.integers(1, 7),
+    st.integers(0, 4),
+    st.sampled_from(["generic", "blocks", "redundant", "zero_cols"]),
+)
+
+
+@settings(max_examples=120, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(systems)
+def test_random_systems_contract_and_maximality(params):
+    seed, n, p, m, kind = params
+    p = min(p, n)
+    A, B, C = random_system(seed, n, p, m, kind)
+    B_in, A_in, C_in = B.copy(), A.copy(), C.copy()
+    res = strong_detectability(A, B, C)
+    np.testing.assert_array_equal(B, B_in)
+    np.testing.assert_array_equal(A, A_in)
+    np.testing.assert_array_equal(C, C_in)
+    check_contract(A, B, C, res)
+    ref = reference_subspace(A, B, C)
+    assert res.delta == ref.shape[1]
+    assert projector_distance(res.T_d, ref) <= EXACT_TOL
+
+
+@settings(max_examples=30, derandomize=True, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 6))
+def test_all_zero_input_equals_no_input(seed, n):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((n, n))
+    C = rng.standard_normal((1, n))
+    r0 = strong_detectability(A, np.zeros((n, 0)), C)
+    r1 = strong_detectability(A, np.zeros((n, 3)), C)
+    assert projector_distance(r0.T_d, r1.T_d) <= EXACT_TOL
+
+
+# ---------------------------------------------------------------------------
+# boundary validation
+# ---------------------------------------------------------------------------
+def test_rank_deficient_C_rejected():
+    A, _, _, Bm = ne2_data()
+    C = np.vstack([np.eye(9)[[0]], 2 * np.eye(9)[[0]]])
+    with pytest.raises(ValueError, match=r"full row rank.*rank 1"):
+        strong_detectability(A, Bm[0], C)
+
+
+@pytest.mark.parametrize(
+    "A, B, C, name",
+    [
+        (np.zeros((3, 2)), np.zeros((3, 1)), np.ones((1, 3)), "A"),
+        (np.zeros(3), np.zeros((3, 1)), np.ones((1, 3)), "A"),
+        (np.zeros((3, 3)), np.zeros((2, 1)), np.ones((1, 3)), "B_unknown"),
+        (np.zeros((3, 3)), np.zeros(3), np.ones((1, 3)), "B_unknown"),
+        (np.zeros((3, 3)), np.zeros((3, 1)), np.ones((1, 2)), "C"),
+        (np.zeros((3, 3)), np.zeros((3, 1)), np.ones((1, 1, 3)), "C"),
+    ],
+)
+def test_shape_errors(A, B, C, name):
+    with pytest.raises(ValueError, match=name):
+        strong_detectability(A, B, C)
+
+
+@pytest.mark.parametrize("which", ["A", "B_unknown", "C"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_rejected(which, bad):
+    A, _, C, Bm = ne2_data()
+    args = {"A": A.copy(), "B_unknown": Bm[0].copy(), "C": C[0].copy()}
+    args[which][0, 0] = bad
+    with pytest.raises(ValueError, match=which):
+        strong_detectability(args["A"], args["B_unknown"], args["C"])
