@@ -1,0 +1,128 @@
+"""Environment names and rl-zoo3-style hyperparameters (``agents/hyperparams/<algo>.yaml``).
+
+Environment names
+-----------------
+``tracking``, ``disturbance_rejection``, ``hetero_mas``, ``random_network`` map to the
+centralised Gymnasium ids ``dobs_envs/<Name>-v0`` and to the PettingZoo modules
+``dobs_envs.<name>_v0`` (multi-agent). Any other Gymnasium id (e.g. ``Pendulum-v1``)
+works for centralised training; ``"package.module:factory"`` names a ParallelEnv
+factory for multi-agent training.
+
+Hyperparameter files
+--------------------
+One YAML file per algorithm, keyed by environment name. Lookup (later entries
+override earlier ones): ``default``, then ``default-ma`` (multi-agent only), then
+``<env>``, then ``<env>-ma`` (multi-agent only). Keys besides the algorithm's
+constructor arguments:
+
+- ``n_envs``: environment copies (multi-agent: copies; each has one slot per agent)
+- ``n_timesteps``: default training budget
+- ``policy``: SB3 policy name (``MlpPolicy``)
+- ``normalize``: ``false`` or a dict of ``VecNormalize`` arguments
+  (``norm_obs``, ``norm_reward``, ``clip_obs``, ...; ``gamma`` defaults to the algorithm's)
+- ``agent_id``: (multi-agent) append a one-hot agent id to observations
+- ``env_kwargs``: keyword arguments for the environment constructor
+- ``policy_kwargs.activation_fn``: a name (``tanh``, ``relu``, ``elu``)
+- ``action_noise`` (TD3/SAC): ``{type: normal, sigma: 0.1}``
+"""
+from __future__ import annotations
+
+import copy
+import importlib
+import os
+from typing import Any, Callable
+
+import yaml
+
+__all__ = ["ENVS", "ALGOS", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gym_factory",
+           "load_hyperparams", "env_key"]
+
+HYPERPARAMS_DIR = os.path.join(os.path.dirname(__file__), "hyperparams")
+
+#: benchmark environments: short name -> (Gymnasium id, PettingZoo module)
+ENVS = {
+    "tracking": ("dobs_envs/Tracking-v0", "dobs_envs.tracking_v0"),
+    "disturbance_rejection": ("dobs_envs/DisturbanceRejection-v0", "dobs_envs.disturbance_rejection_v0"),
+    "hetero_mas": ("dobs_envs/HeteroMAS-v0", "dobs_envs.hetero_mas_v0"),
+    "random_network": ("dobs_envs/RandomNetwork-v0", "dobs_envs.random_network_v0"),
+}
+
+ALGOS = ("ppo", "sac", "td3")
+MULTI_AGENT_ALGOS = ("ppo", "sac")
+
+
+def env_key(env: str) -> str:
+    """Normalised short name (``hetero-mas`` -> ``hetero_mas``) or the name unchanged."""
+    k = env.replace("-", "_").lower()
+    return k if k in ENVS else env
+
+
+def gym_id(env: str) -> str:
+    k = env_key(env)
+    if k in ENVS:
+        return ENVS[k][0]
+    return env
+
+
+def gym_factory(env: str, env_kwargs: dict | None = None) -> Callable[[], Any]:
+    """Factory of the centralised Gymnasium env (registers dobs_envs' ids first)."""
+    import gymnasium as gym
+
+    import dobs_envs  # noqa: F401  (registers dobs_envs/* ids)
+
+    gid = gym_id(env)
+    kw = dict(env_kwargs or {})
+    return lambda: gym.make(gid, **kw)
+
+
+def _parallel_ctor(env: str) -> Callable[..., Any]:
+    k = env_key(env)
+    if k in ENVS:
+        mod = importlib.import_module(ENVS[k][1])
+        for name in ("parallel_env", "env"):
+            fn = getattr(mod, name, None)
+            if callable(fn):
+                return fn
+        raise AttributeError(f"{ENVS[k][1]} has no parallel_env() constructor")
+    if ":" in env:
+        mod_name, attr = env.split(":", 1)
+        return getattr(importlib.import_module(mod_name), attr)
+    raise ValueError(f"no PettingZoo environment named {env!r}; choose from {sorted(ENVS)} or 'module:factory'")
+
+
+def parallel_factory(env: str | Callable[..., Any], env_kwargs: dict | None = None) -> Callable[[], Any]:
+    """Factory of the PettingZoo parallel env ``env`` (name or constructor)."""
+    ctor = env if callable(env) else _parallel_ctor(env)
+    kw = dict(env_kwargs or {})
+    return lambda: ctor(**kw)
+
+
+def _load_yaml(algo: str) -> dict:
+    path = os.path.join(HYPERPARAMS_DIR, f"{algo}.yaml")
+    if not os.path.exists(path):
+        raise ValueError(f"no hyperparameter file for algorithm {algo!r} ({path}); algorithms: {ALGOS}")
+    with open(path) as fh:
+        return yaml.safe_load(fh) or {}
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = copy.deepcopy(base)
+    for k, v in (over or {}).items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, overrides: dict | None = None) -> dict:
+    """Merged hyperparameters of ``algo`` on ``env`` (see module doc for the lookup)."""
+    algo = algo.lower()
+    table = _load_yaml(algo)
+    name = env_key(env) if isinstance(env, str) else "default"
+    keys = ["default"] + (["default-ma"] if multi_agent else []) + [name] + ([f"{name}-ma"] if multi_agent else [])
+    hp: dict = {}
+    for k in keys:
+        if k in table:
+            hp = _merge(hp, table[k])
+    return _merge(hp, overrides or {})

@@ -1,0 +1,277 @@
+"""Train SB3 agents on the centralised Gymnasium envs or (parameter-shared) on the PettingZoo envs.
+
+- centralised: PPO, SAC, TD3 on ``dobs_envs/<Name>-v0`` (one agent acting for all
+  controller nodes) or any Gymnasium id;
+- multi-agent: PPO and SAC with one policy shared by every controller node, through
+  :class:`agents.vec_env.ParallelVecEnv` (one VecEnv slot per (copy, agent)).
+
+Budgets (``timesteps``) are *environment* steps: for multi-agent training SB3 counts
+one sample per agent, so the SB3 budget is ``timesteps * n_agents``.
+
+A run directory holds ``model.zip``, ``vecnormalize.pkl`` (when observations or
+rewards are normalised), ``config.json`` (everything needed to rebuild the env and
+the policy inputs) and ``checkpoints/``. :func:`load_agent` reads it back.
+"""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from .config import MULTI_AGENT_ALGOS, gym_factory, load_hyperparams, parallel_factory
+from .vec_env import ParallelVecEnv, SlotEncoder
+
+__all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "TqdmCallback", "set_threads"]
+
+_ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
+_EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise")
+
+
+def set_threads(threads: int | None = 1) -> None:
+    """``torch.set_num_threads`` (1 by default: small MLPs on 2-core machines are ~10x
+    faster single-threaded)."""
+    import torch
+
+    if threads:
+        torch.set_num_threads(int(threads))
+
+
+def _algo_class(algo: str):
+    from stable_baselines3 import PPO, SAC, TD3
+
+    table = {"ppo": PPO, "sac": SAC, "td3": TD3}
+    try:
+        return table[algo.lower()]
+    except KeyError:
+        raise ValueError(f"unknown algorithm {algo!r}; choose from {sorted(table)}") from None
+
+
+def _policy_kwargs(pk: dict | None) -> dict:
+    import torch.nn as nn
+
+    pk = dict(pk or {})
+    act = pk.get("activation_fn")
+    if isinstance(act, str):
+        name = _ACTIVATIONS.get(act.lower())
+        if name is None:
+            raise ValueError(f"unknown activation_fn {act!r}; choose from {sorted(_ACTIVATIONS)}")
+        pk["activation_fn"] = getattr(nn, name)
+    return pk
+
+
+def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int | None = None,
+                  env_kwargs: dict | None = None, agent_id: bool = False):
+    """Monitored VecEnv for training (not normalised).
+
+    ``env`` is a name (see :mod:`agents.config`) or, for multi-agent, a ParallelEnv
+    constructor. Centralised envs use ``DummyVecEnv`` + ``Monitor``; multi-agent
+    ones :class:`ParallelVecEnv` + ``VecMonitor``.
+    """
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    if multi_agent:
+        fac = parallel_factory(env, env_kwargs)
+        venv = VecMonitor(ParallelVecEnv([fac for _ in range(n_envs)], agent_id=agent_id))
+        if seed is not None:
+            venv.seed(seed)
+        return venv
+    if callable(env):
+        fac = lambda: env(**(env_kwargs or {}))  # noqa: E731
+    else:
+        fac = gym_factory(env, env_kwargs)
+    return make_vec_env(fac, n_envs=n_envs, seed=seed, vec_env_cls=DummyVecEnv)
+
+
+class TqdmCallback:
+    """Progress bar over environment steps (SB3's own needs ``rich``)."""
+
+    def __new__(cls, total: int, desc: str = "train", scale: int = 1):
+        from stable_baselines3.common.callbacks import BaseCallback
+        from tqdm.auto import tqdm
+
+        class _Cb(BaseCallback):
+            def _on_training_start(self):
+                self.bar = tqdm(total=total, desc=desc, unit="step", mininterval=1.0, dynamic_ncols=True)
+
+            def _on_step(self):
+                self.bar.n = min(total, self.num_timesteps // scale)
+                self.bar.refresh() if self.bar.n % 512 == 0 else None
+                return True
+
+            def _on_training_end(self):
+                self.bar.n = min(total, self.num_timesteps // scale)
+                self.bar.close()
+
+        return _Cb()
+
+
+@dataclass
+class TrainResult:
+    path: str
+    model: Any
+    seconds: float
+    config: dict
+
+
+def default_run_dir(env: str, algo: str, multi_agent: bool, seed: int) -> str:
+    name = env if isinstance(env, str) else getattr(env, "__name__", "env")
+    name = name.replace("/", "_").replace(":", "_")
+    return os.path.join("runs", f"{name}_{algo}{'_ma' if multi_agent else ''}_s{seed}")
+
+
+def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int | None = None, seed: int = 0,
+          out: str | None = None, tensorboard: str | None = None, progress: bool = True,
+          checkpoint_freq: int | None = None, hyperparams: dict | None = None, env_kwargs: dict | None = None,
+          threads: int | None = 1, verbose: int = 0, env_name: str | None = None) -> TrainResult:
+    """Train ``algo`` on ``env`` and save the run directory (see module doc).
+
+    Parameters
+    ----------
+    env : environment name (or, multi-agent, a ParallelEnv constructor; then pass
+        ``env_name`` for the hyperparameter lookup and the config).
+    timesteps : environment steps (default: the YAML ``n_timesteps``).
+    hyperparams : overrides merged over the YAML entry.
+    checkpoint_freq : environment steps between checkpoints (default: timesteps // 4; 0 disables).
+    threads : torch threads (None keeps torch's default).
+    """
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    algo = algo.lower()
+    if multi_agent and algo not in MULTI_AGENT_ALGOS:
+        raise ValueError(f"multi-agent training supports {MULTI_AGENT_ALGOS}, not {algo!r}")
+    name = env_name or (env if isinstance(env, str) else "default")
+    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams)
+    set_threads(threads)
+    n_envs = int(hp.get("n_envs", 1))
+    timesteps = int(timesteps if timesteps is not None else hp.get("n_timesteps", 100000))
+    kw = dict(hp.get("env_kwargs") or {})
+    kw.update(env_kwargs or {})
+    agent_id = bool(hp.get("agent_id", False)) and multi_agent
+    venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id)
+    n_agents = venv.unwrapped.n_agents if multi_agent else 1
+    norm = hp.get("normalize") or False
+    if norm:
+        nk = dict(norm) if isinstance(norm, dict) else {}
+        nk.setdefault("gamma", hp.get("gamma", 0.99))
+        venv = VecNormalize(venv, **nk)
+    algo_kw = {k: v for k, v in hp.items() if k not in _EXTRA_KEYS}
+    algo_kw["policy_kwargs"] = _policy_kwargs(algo_kw.get("policy_kwargs"))
+    noise = hp.get("action_noise")
+    if noise and algo in ("td3", "sac"):
+        d = venv.action_space.shape[0]
+        algo_kw["action_noise"] = NormalActionNoise(np.zeros(d), float(noise.get("sigma", 0.1)) * np.ones(d))
+    out = out or default_run_dir(name, algo, multi_agent, seed)
+    os.makedirs(out, exist_ok=True)
+    cls = _algo_class(algo)
+    model = cls(hp.get("policy", "MlpPolicy"), venv, seed=seed, verbose=verbose, tensorboard_log=tensorboard, **algo_kw)
+    sb3_steps = timesteps * n_agents
+    callbacks = []
+    ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
+    if ckpt > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(ckpt * n_agents // venv.num_envs, 1),
+                                            save_path=os.path.join(out, "checkpoints"), name_prefix=algo,
+                                            save_vecnormalize=bool(norm)))
+    if progress:
+        callbacks.append(TqdmCallback(timesteps, desc=f"{algo}{'-ma' if multi_agent else ''} {name}", scale=n_agents))
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=sb3_steps, callback=CallbackList(callbacks) if callbacks else None,
+                tb_log_name=f"{algo}{'_ma' if multi_agent else ''}")
+    seconds = time.perf_counter() - t0
+    model.save(os.path.join(out, "model.zip"))
+    if norm:
+        venv.save(os.path.join(out, "vecnormalize.pkl"))
+    config = {
+        "env": name, "algo": algo, "multi_agent": multi_agent, "seed": seed, "timesteps": timesteps,
+        "sb3_timesteps": int(model.num_timesteps), "n_agents": n_agents, "agent_id": agent_id,
+        "env_kwargs": kw, "normalize": bool(norm), "train_seconds": seconds,
+        "hyperparams": {k: v for k, v in hp.items()},
+    }
+    with open(os.path.join(out, "config.json"), "w") as fh:
+        json.dump(config, fh, indent=2, default=str)
+    venv.close()
+    return TrainResult(path=out, model=model, seconds=seconds, config=config)
+
+
+class TrainedAgent:
+    """A saved run loaded for evaluation: normalises observations like in training.
+
+    ``central_policy()`` -> ``obs -> action`` (Gymnasium env);
+    ``parallel_policy(env)`` -> ``{agent: obs} -> {agent: action}`` (PettingZoo env,
+    shared policy, same padding/one-hot as :class:`ParallelVecEnv`).
+    """
+
+    def __init__(self, path: str, device: str = "cpu"):
+        path = path[:-len("model.zip")] if path.endswith("model.zip") else path
+        path = path.rstrip("/") or "."
+        with open(os.path.join(path, "config.json")) as fh:
+            self.config = json.load(fh)
+        self.path = path
+        self.algo = self.config["algo"]
+        self.multi_agent = bool(self.config["multi_agent"])
+        self.model = _algo_class(self.algo).load(os.path.join(path, "model.zip"), device=device)
+        vn = os.path.join(path, "vecnormalize.pkl")
+        self.vecnorm = None
+        if os.path.exists(vn):
+            with open(vn, "rb") as fh:
+                self.vecnorm = pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+            self.vecnorm.training = False
+            self.vecnorm.norm_reward = False
+
+    @property
+    def name(self) -> str:
+        return f"{self.algo.upper()}{' (shared)' if self.multi_agent else ''}"
+
+    @property
+    def observation_space(self):
+        return self.model.observation_space
+
+    @property
+    def action_space(self):
+        return self.model.action_space
+
+    def predict(self, obs, deterministic: bool = True) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        if self.vecnorm is not None:
+            obs = self.vecnorm.normalize_obs(obs)
+        act, _ = self.model.predict(obs, deterministic=deterministic)
+        return act
+
+    def central_policy(self, deterministic: bool = True) -> Callable:
+        lo, hi = self.action_space.low, self.action_space.high
+
+        def policy(obs):
+            a = self.predict(np.asarray(obs)[None], deterministic)[0]
+            return np.clip(a, lo, hi)
+
+        return policy
+
+    def encoder_for(self, env) -> SlotEncoder:
+        agents = list(env.possible_agents)
+        enc = SlotEncoder(agents, {a: env.observation_space(a) for a in agents},
+                          {a: env.action_space(a) for a in agents}, agent_id=self.config.get("agent_id", False))
+        if enc.observation_space.shape != self.observation_space.shape:
+            raise ValueError(f"model expects observations of shape {self.observation_space.shape}, "
+                             f"the env gives {enc.observation_space.shape}")
+        return enc
+
+    def parallel_policy(self, env, deterministic: bool = True) -> Callable:
+        enc = self.encoder_for(env)
+
+        def policy(observations: dict) -> dict:
+            acts = self.predict(enc.encode_all(observations), deterministic)
+            return {a: act for a, act in enc.decode_all(acts).items() if a in observations}
+
+        return policy
+
+
+def load_agent(path: str, device: str = "cpu") -> TrainedAgent:
+    """Load a run directory (or its ``model.zip``) written by :func:`train`."""
+    return TrainedAgent(path, device=device)
