@@ -1,1 +1,33 @@
-"""The paper's design layer (Lemma 2, observer gains, controller gains)."""
+"""The paper's design layer (Lemma 2, observer gains, controller gains).
+
+Public API
+----------
+- :func:`strong_detectability`, :class:`StrongDetectability` -- Lemma 2 (FUIO), Appendix algorithm.
+- :func:`reconstructible_subspace` -- independent geometric characterisation of ``Im T_id``.
+- :func:`shifted_are_feedback` (NE2), :func:`lyapunov_P` (NE3), :func:`observer_are_gain` (NE1).
+- :class:`ObserverDesign`, :func:`design_distributed_observer` (eq. barEFGB/TidTiu),
+  :func:`design_mas_observer` (eq. obidynamicMAS), :func:`observer_residuals`.
+"""
+from .gains import lyapunov_P, observer_are_gain, shifted_are_feedback, split_gain
+from .geometric import reconstructible_subspace
+from .lemma2 import StrongDetectability, strong_detectability
+from .observer import (
+    ObserverDesign,
+    design_distributed_observer,
+    design_mas_observer,
+    observer_residuals,
+)
+
+__all__ = [
+    "StrongDetectability",
+    "strong_detectability",
+    "reconstructible_subspace",
+    "shifted_are_feedback",
+    "lyapunov_P",
+    "observer_are_gain",
+    "split_gain",
+    "ObserverDesign",
+    "design_distributed_observer",
+    "design_mas_observer",
+    "observer_residuals",
+]
