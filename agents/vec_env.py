@@ -274,6 +274,8 @@ class ParallelVecEnv(VecEnv):
     # ------------------------------------------------------------------ attribute access
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         copies = self._copies(indices)
+        if attr_name == "render_mode":  # optional in PettingZoo envs
+            return [getattr(self.envs[c], "render_mode", None) for c in copies]
         vals = {c: getattr(self.envs[c], attr_name) for c in dict.fromkeys(copies)}
         return [vals[c] for c in copies]
 
