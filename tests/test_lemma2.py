@@ -218,8 +218,9 @@ def test_integrator_chain_hidden_by_unknown_input():
     assert projector_distance(res.T_d, Q.T[:, [5]]) <= EXACT_TOL
 
 
-def test_stable_states_combined_with_outputs_r_d_le_p():
-    """Paper step 7 with r_d <= p would return T = C and drop x1 (deviation 1)."""
+def test_stable_decoupled_state_and_input_driven_output():
+    """x1' = -x1 (no output), x2' = u, y = x2: x1 by z' = -z, x2 = y. The
+    unknown input is recovered from y', so r_d = 2 > p = 1 in step 6."""
     A = np.diag([-1.0, 0.0])
     B = np.array([[0.0], [1.0]])
     C = np.array([[0.0, 1.0]])
@@ -229,8 +230,9 @@ def test_stable_states_combined_with_outputs_r_d_le_p():
     assert is_hurwitz(res.E)
 
 
-def test_stable_states_combined_with_outputs_r_d_gt_p():
-    """Paper step 7 with r_d > p would drop the measured x3 (deviation 1)."""
+def test_measured_integrator_with_stable_unmeasured_states():
+    """The measured, input-driven integrator x3 and the stable x1, x2 are all
+    reconstructible: the rows of C survive steps 1-5 and are in Im T_d."""
     A = np.diag([-1.0, -2.0, 0.0])
     A[0, 1] = 1.0
     B = np.array([[0.0], [0.0], [1.0]])
@@ -254,6 +256,23 @@ def test_unstable_zero_dynamics_not_reconstructible():
     res = strong_detectability(A, B, C)
     check_contract(A, B, C, res)
     assert res.delta == 2
+
+
+def test_no_output():
+    """p = 0: the stable, input-free functionals are still reconstructible."""
+    A = np.diag([-1.0, 1.0, -3.0])
+    B = np.eye(3)[:, [2]]
+    C = np.zeros((0, 3))
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert projector_distance(res.T_d, np.eye(3)[:, [0]]) <= EXACT_TOL
+
+
+def test_explicit_tol_and_delta_property():
+    A, _, C, Bm = ne2_data()
+    res = strong_detectability(A, Bm[3], C[3], tol=1e-10)
+    check_contract(A, Bm[3], C[3], res)
+    assert res.delta == res.T_d.shape[1] == 3
 
 
 def test_scale_invariance_and_margin():
@@ -293,11 +312,13 @@ def random_system(seed, n, p, m, kind):
     A = rng.standard_normal((n, n))
     if kind == "blocks":
         # decoupled stable / marginal / unstable parts, rotated: exercises the
-        # detectability decomposition and deviation 1
+        # detectability decomposition (marginal / unstable / stable modes)
         diag = rng.choice([-2.0, -0.5, 0.0, 0.7], size=n)
         A = np.diag(diag) + np.triu(rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.3), 1)
         Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
         A = Q.T @ A @ Q
+    if kind == "mixed":
+        return mixed_system(rng, n, p, m)
     C = rng.standard_normal((p, n))
     if kind == "blocks":
         C = C * (rng.random((p, n)) < 0.5) + np.eye(n)[rng.choice(n, size=p, replace=False)]
@@ -316,12 +337,39 @@ def random_system(seed, n, p, m, kind):
     return A, B, C
 
 
+def mixed_system(rng, n, p, m):
+    """Observed part x1 (with unknown inputs), unobserved autonomous part x2
+    driven by x1 (reconstructible iff its spectrum is stable; eigenvalue 0 or
+    an unstable one is drawn sometimes), unobserved part x3 driven by the
+    unknown input; then an orthogonal change of basis. Gives 'intermediate'
+    delta with every mechanism of step 6 represented."""
+    n1 = int(rng.integers(1, n))
+    n2 = int(rng.integers(0, n - n1 + 1))
+    n3 = n - n1 - n2
+    p = min(p, n1)
+    m1 = min(m, p)
+    A = rng.standard_normal((n, n)) * 0.7
+    A[:n1, n1:] = 0.0  # x1 not influenced by x2, x3
+    A[n1 : n1 + n2, n1 + n2 :] = 0.0  # x2 not influenced by x3
+    if n2:
+        ev = rng.choice([-1.5, -0.4, 0.0, 0.8], size=n2)
+        V = rng.standard_normal((n2, n2)) + 2 * np.eye(n2)
+        A[n1 : n1 + n2, n1 : n1 + n2] = np.linalg.solve(V.T, (V * ev).T).T  # V diag(ev) V^-1
+    C = np.hstack([rng.standard_normal((p, n1)), np.zeros((p, n - n1))])
+    B = np.zeros((n, m1 + (1 if n3 else 0)))
+    B[:n1, :m1] = rng.standard_normal((n1, m1))
+    if n3:
+        B[n1 + n2 :, -1] = rng.standard_normal(n3)
+    Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    return Q.T @ A @ Q, Q.T @ B, C @ Q
+
+
 systems = st.tuples(
     st.integers(0, 2**32 - 1),
     st.integers(2, 7),
     st.integers(1, 7),
     st.integers(0, 4),
-    st.sampled_from(["generic", "blocks", "redundant", "zero_cols"]),
+    st.sampled_from(["generic", "blocks", "redundant", "zero_cols", "mixed", "mixed"]),
 )
 
 
@@ -329,7 +377,7 @@ systems = st.tuples(
 @given(systems)
 def test_random_systems_contract_and_maximality(params):
     seed, n, p, m, kind = params
-    p = min(p, n)
+    p = 1 + (p - 1) % (n - 1)  # 1 <= p < n: p = n is trivially T_d = I
     A, B, C = random_system(seed, n, p, m, kind)
     B_in, A_in, C_in = B.copy(), A.copy(), C.copy()
     res = strong_detectability(A, B, C)
@@ -377,6 +425,14 @@ def test_rank_deficient_C_rejected():
 def test_shape_errors(A, B, C, name):
     with pytest.raises(ValueError, match=name):
         strong_detectability(A, B, C)
+
+
+def test_complex_and_bad_margin_rejected():
+    A, _, C, Bm = ne2_data()
+    with pytest.raises(ValueError, match="A must be real"):
+        strong_detectability(A.astype(complex), Bm[0], C[0])
+    with pytest.raises(ValueError, match="margin"):
+        strong_detectability(A, Bm[0], C[0], margin=0.0)
 
 
 @pytest.mark.parametrize("which", ["A", "B_unknown", "C"])

@@ -18,9 +18,9 @@ design of Section IV (eqs. ``obidynamic``, ``barEFGB``, ``TidTiu``) uses
 ``T_id``, ``T_iu``, ``E_i``, ``F_i``, ``G_i``.
 
 :func:`strong_detectability` implements the Appendix "Algorithm Associated with
-Lemma 2" (steps 1-8) with SVD rank-revealing factorisations, plus the
-corrections listed under *Deviations* in its docstring (the printed step 7 is
-not maximal in two cases).
+Lemma 2" (steps 1-8) with SVD rank-revealing factorisations; its docstring
+explains why the printed step 7 is maximal and lists the implementation
+choices the paper leaves open.
 
 Reading of the algorithm (used in the comments below)
 -----------------------------------------------------
@@ -111,6 +111,8 @@ class StrongDetectability:
 # validation
 # ---------------------------------------------------------------------------
 def _as_matrix(name: str, M) -> np.ndarray:
+    if np.iscomplexobj(M):
+        raise ValueError(f"{name} must be real, got a complex array")
     try:
         arr = np.array(M, dtype=float, copy=True)
     except (TypeError, ValueError) as exc:
@@ -290,7 +292,9 @@ def strong_detectability(
         ``Im B_unknown`` (the paper assumes full column rank).
     C : array_like, shape (p, n)
         Output matrix ``C_i`` of (``localmeasure``); must have full row rank,
-        as the paper requires.
+        as the paper requires. ``p = 0`` (no output) is accepted: then only
+        functionals with stable dynamics unaffected by the unknown input are
+        reconstructible.
     tol : float, optional
         Absolute singular-value threshold for every rank decision. It is
         applied to the internally normalised data (``A / ||A||_2``, orthonormal
@@ -331,41 +335,52 @@ def strong_detectability(
     is orthogonal, ``r_d`` is the dimension of the detectable quotient.
     Step 8 uses a QR factorisation (Gram-Schmidt) and triangular solves.
 
-    Deviations from the printed algorithm (and why)
-    ------------------------------------------------
-    1. *Step 7 is generalised* to ``T_id0^T = [J Phi Xi_21 Xi_1 ; R_c C_i]``:
-       the ``r_d`` detectable functionals of step 6 are always combined with
-       the rows of ``C_i`` not already in their span (``R_c C_i``, observed
-       through ``G`` with a zero ``N``-block). The printed branches lose
-       reconstructible functionals: for ``r_d <= p_i`` the choice
-       ``T_id0 = C_i`` discards the step-6 functionals whenever they are not
-       contained in the row space of ``C_i`` (e.g. a stable decoupled state
-       plus a measured state driven by the unknown input), and for
-       ``r_d > p_i`` the rows of ``C_i`` are dropped when not in
-       ``Im J Phi Xi_21 Xi_1``. Either way ``Im T_id`` would not be maximal,
-       contradicting the Remark after Lemma 2. The ``E = 0`` branch
-       (``T_id^T = G_i C_i``) is used exactly when the step-6 functionals lie
-       in the row space of ``C_i`` (in particular when ``r_d = 0``);
-       ``delta_i = dim(Im T_dyn + Im C_i^T) >= max(r_d, p_i)``.
-    2. The rows of ``Pi_4`` (relations) are row-compressed to an orthonormal
+    Step 7 and maximality (is the printed algorithm maximal? yes)
+    ---------------------------------------------------------------
+    The printed step 7 has two branches, ``T_id0^T = J Phi Xi_21 Xi_1`` when
+    ``r_d > p_i`` and ``T_id0^T = C_i`` (``E_i = 0``) when ``r_d <= p_i``. Either
+    would lose reconstructible functionals if the step-6 functionals
+    ``T_dyn = J_1 (rho)`` did not contain the row space of ``C_i``. They always
+    do (``p_i >= 1``, exact arithmetic): for a row ``c`` of ``C_i``,
+    ``c Lambda_12 = 0`` by the construction of ``Psi_0`` (so ``c`` is in the
+    row space of ``Xi_1``), its derivative ``c x' = y_c'`` is known and its
+    value ``c x = y_c`` is a relation, and both identities are free of the
+    eliminated coordinates at every stage, so ``c`` survives every iteration
+    of steps 4-5 and is an *observed* direction of ``(Pi_3, Pi_4)``. Hence
+    ``r_d >= p_i``, the branch ``r_d <= p_i`` means ``Im T_dyn = Im C_i^T``,
+    and ``delta_i = max(r_d, p_i) = r_d``. We implement step 7 as the union
+    ``T_id0^T = [T_dyn ; R_c C_i]`` with ``R_c C_i`` the rows of ``C_i`` not
+    (numerically) in ``Im T_dyn^T`` (observed through ``G`` with a zero
+    ``N``-block and an ``E``-block ``-margin * I``); in exact arithmetic
+    ``R_c`` is empty and this *is* the printed algorithm, numerically it
+    guards against a rank decision at the tolerance boundary. The ``E = 0``
+    branch (``T_id^T = G_i C_i``, ``F_i = 0``) is taken when ``Im T_dyn``
+    lies in the row space of ``C_i`` (this covers ``r_d = p_i``, ``r_d = 0``).
+
+    Maximality (Remark after Lemma 2): if ``(T, E', F', G')`` is any valid
+    quadruplet, ``N' = T^T - G' C`` has a kernel that is a
+    ``(C, A)``-conditioned invariant subspace containing ``Im B``; writing
+    ``N' = Q N`` in the step-6 functionals, ``Q Pi_3 = E' Q + L Pi_4`` forces
+    ``Q`` to vanish on the undetectable subspace (Sylvester equation with
+    disjoint spectra when ``E'`` is Hurwitz; ``N' = 0`` when ``E' = 0``). The
+    test-suite checks ``Im T_d`` against an independent geometric
+    characterisation (minimal conditioned invariant subspace and fixed
+    unstable modes) on random systems.
+
+    Implementation choices not fixed by the paper
+    ----------------------------------------------
+    1. The rows of ``Pi_4`` (relations) are row-compressed to an orthonormal
        basis before step 6 (a change of basis of the relations, carried into
        the known-term matrix), and ``J_2`` comes from a shifted ARE
-       (:func:`_stabilising_injection`) -- the paper leaves ``J_2`` free.
-    3. The data are normalised first (``A/||A||``, orthonormal ``Im B``, row
-       space of ``C``) so the rank decisions are unit-free; ``E, F, G`` are
-       mapped back exactly.
-    4. In the combined case the block of ``E`` acting on the ``C``-rows is
-       ``-margin * I`` (its error component is identically zero, so any Hurwitz
-       block is valid); ``E`` is then Hurwitz rather than zero.
-
-    Maximality argument: if ``(T, E', F', G')`` is any valid quadruplet, its
-    ``N' = T^T - G' C`` has a kernel that is a ``(C, A)``-conditioned
-    invariant subspace containing ``Im B``; step 1-6 functionals span (modulo
-    the rows of ``C``) the annihilator of the minimal such subspace, and
-    ``N' = Q N``, ``Q Pi_3 = E' Q + L Pi_4`` forces ``Q`` to vanish on the
-    undetectable subspace (Sylvester equation with disjoint spectra when
-    ``E'`` is Hurwitz; ``N' = 0`` when ``E' = 0``). Hence
-    ``Im T subseteq Im T_dyn + Im C^T = Im T_d``.
+       (:func:`_stabilising_injection`); the paper leaves ``J_2`` free.
+    2. The data are normalised first (``A/||A||``, orthonormal basis of
+       ``Im B_unknown``, orthonormal rows spanning the row space of ``C``) so
+       rank decisions are unit-free and redundant ``B_unknown`` columns are
+       harmless; ``E, F, G`` are mapped back exactly.
+    3. Marginal eigenvalues of ``Pi_3`` on its unobservable subspace count as
+       undetectable; defective eigenvalues are classified by cluster mean
+       (:func:`_eigen_clusters`), since e.g. the NE2 integrator chains give
+       computed eigenvalues with ``|Re| ~ 1e-3``.
     """
     A0, B0, C0 = _validate(A, B_unknown, C)
     n = A0.shape[0]
@@ -373,7 +388,7 @@ def strong_detectability(
     if not (np.isfinite(margin) and margin > 0):
         raise ValueError(f"margin must be a positive finite number, got {margin!r}")
 
-    # ---- normalisation (deviation 3) -------------------------------------
+    # ---- normalisation (implementation choice 2) -------------------------------------
     a_scale = float(np.linalg.norm(A0, 2))
     if a_scale == 0.0:
         a_scale = 1.0
@@ -457,7 +472,7 @@ def strong_detectability(
     F_dyn = np.zeros((0, p))
     E_dyn = np.zeros((0, 0))
     if r_rho:
-        # deviation 2: row-compress the relations 0 = Pi4 rho + Kb Y
+        # implementation choice 1: row-compress the relations 0 = Pi4 rho + Kb Y
         if Pi4.shape[0]:
             U4, s4, V4t = np.linalg.svd(Pi4, full_matrices=False)
             k4 = int(np.sum(s4 > rank_tol(s4, Pi4.shape, tol)))
@@ -493,7 +508,7 @@ def strong_detectability(
             G_dyn = Kd[:, p:]
             F_dyn = E_dyn @ G_dyn + Kd[:, :p]
 
-    # ---- step 7 (generalised, deviation 1) ----------------------------------
+    # ---- step 7 (as the union T_dyn + rows of C; R_c is empty in exact arithmetic) ----------------------------------
     if T_dyn.shape[0]:
         Xc = Cq.T - T_dyn.T @ (T_dyn @ Cq.T)  # row-space part of C outside Im T_dyn
         if Xc.size:
