@@ -1,0 +1,175 @@
+"""Seeded evaluation of any policy (RL agent or analytic) on the dobs_envs environments.
+
+A policy is evaluated on episodes ``k = 0..K-1`` reset with seed ``seed + k``; the
+environments draw the initial state (and disturbance) from that seed, so every
+policy sees the same initial conditions. The Gymnasium envs wrap the same
+PettingZoo env, so centralised and per-agent policies can be compared directly
+(:func:`evaluate_policy` records ``x(0)`` of every episode to make that checkable).
+
+Per-episode metrics (read from the underlying simulation, identical for all policies):
+
+- ``return``: sum of the team reward ``-(e'Qe + u'Ru) * period``;
+- ``final_tracking_error``: ``||x - x_r||`` (``||x||`` without reference) at the last step;
+- ``rms_estimation_error``: RMS over time and observer nodes of ``||xhat_i - x||`` of the
+  environment's distributed observer (it runs whatever the policy does);
+- ``control_effort``: ``int ||u||^2 dt`` of the applied (clipped) input;
+- ``failed``: the episode terminated early (state bound exceeded or non-finite state);
+- ``rms_policy_estimation_error`` (policies exposing ``estimates``, e.g. the
+  decentralised baseline): RMS error of the estimates the policy acted on.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["EpisodeResult", "evaluate_policy", "summarise", "METRICS"]
+
+METRICS = ("return", "final_tracking_error", "rms_estimation_error", "control_effort", "failed")
+
+
+def _base(env):
+    from baselines.references import base_env
+
+    return base_env(env)
+
+
+@dataclass
+class EpisodeResult:
+    seed: int
+    ret: float
+    length: int
+    failed: bool
+    final_tracking_error: float
+    rms_estimation_error: float
+    control_effort: float
+    rms_policy_estimation_error: float | None
+    x0: np.ndarray
+    t: np.ndarray = field(repr=False)
+    tracking_error: np.ndarray = field(repr=False)
+    estimation_error: np.ndarray = field(repr=False)  # mean over nodes of ||xhat_i - x|| per step
+
+    def as_dict(self) -> dict:
+        return {"seed": self.seed, "return": self.ret, "length": self.length, "failed": self.failed,
+                "final_tracking_error": self.final_tracking_error, "rms_estimation_error": self.rms_estimation_error,
+                "control_effort": self.control_effort, "rms_policy_estimation_error": self.rms_policy_estimation_error,
+                "x0": [float(v) for v in self.x0]}
+
+
+def _clipped(u, space):
+    return np.clip(np.asarray(u, dtype=np.float64).reshape(space.shape), space.low, space.high)
+
+
+def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeResult:
+    """One episode of ``policy`` on ``env`` (parallel: dict API; else Gymnasium API)."""
+    base = _base(env)
+    if hasattr(policy, "reset"):
+        policy.reset()
+    out = env.reset(seed=int(seed))
+    obs = out[0]
+    period = float(base.control_period)
+    xs = base.state_layout()["x"]
+    x0 = np.asarray(base.state(), dtype=np.float64)[xs].copy()
+    ts, te, ee = [0.0], [float(base.tracking_error)], [float(np.mean(base.estimation_errors() ** 2))]
+    ret, effort, failed, n = 0.0, 0.0, False, 0
+    pol_err2, pol_cnt = 0.0, 0
+    agent0 = base.possible_agents[0]
+    has_est = hasattr(policy, "estimates")
+    while True:
+        act = policy(obs)
+        if has_est and getattr(policy, "estimates", None):
+            x = np.asarray(base.state(), dtype=np.float64)[xs]
+            for v in policy.estimates.values():
+                pol_err2 += float(np.sum((np.asarray(v) - x) ** 2))
+                pol_cnt += 1
+        if parallel:
+            u2 = sum(float(np.sum(_clipped(act[a], base.action_space(a)) ** 2)) for a in act)
+            obs, rew, term, trunc, _ = env.step(act)
+            r = float(rew[agent0])
+            done_term = any(term.values())
+            done = done_term or any(trunc.values()) or not base.agents
+        else:
+            u2 = float(np.sum(_clipped(act, env.action_space) ** 2))
+            obs, r, done_term, truncated, _ = env.step(act)
+            r = float(r)
+            done = done_term or truncated
+        n += 1
+        ret += r
+        effort += u2 * period
+        ts.append(n * period)
+        te.append(float(base.tracking_error))
+        ee.append(float(np.mean(base.estimation_errors() ** 2)))
+        if done:
+            failed = bool(done_term)
+            break
+    ee_arr = np.sqrt(np.asarray(ee))
+    return EpisodeResult(
+        seed=int(seed), ret=ret, length=n, failed=failed, final_tracking_error=te[-1],
+        rms_estimation_error=float(math.sqrt(np.mean(ee))), control_effort=effort,
+        rms_policy_estimation_error=float(math.sqrt(pol_err2 / pol_cnt)) if pol_cnt else None,
+        x0=x0, t=np.asarray(ts), tracking_error=np.asarray(te), estimation_error=ee_arr,
+    )
+
+
+def evaluate_policy(env, policy: Callable, episodes: int, seed: int, *, parallel: bool,
+                    progress: bool = False, desc: str = "") -> list[EpisodeResult]:
+    """``episodes`` episodes with seeds ``seed, seed + 1, ...``."""
+    it = range(episodes)
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, desc=desc or "evaluate", unit="ep", leave=False)
+    return [run_episode(env, policy, seed + k, parallel=parallel) for k in it]
+
+
+def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
+    """Mean and std over episodes of every metric (``failure_rate`` for ``failed``)."""
+    def ms(vals):
+        a = np.asarray(vals, dtype=np.float64)
+        return float(np.mean(a)), float(np.std(a))
+
+    out: dict[str, Any] = {"episodes": len(results), "seeds": [r.seed for r in results]}
+    for key, attr in (("return", "ret"), ("final_tracking_error", "final_tracking_error"),
+                      ("rms_estimation_error", "rms_estimation_error"), ("control_effort", "control_effort"),
+                      ("length", "length")):
+        out[f"{key}_mean"], out[f"{key}_std"] = ms([getattr(r, attr) for r in results])
+    out["failure_rate"] = float(np.mean([r.failed for r in results]))
+    pe = [r.rms_policy_estimation_error for r in results if r.rms_policy_estimation_error is not None]
+    out["rms_policy_estimation_error_mean"] = float(np.mean(pe)) if pe else None
+    return out
+
+
+def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True) -> dict:
+    """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment."""
+    from .config import gym_factory, parallel_factory
+    from .train import load_agent
+
+    agent = load_agent(path)
+    cfg = agent.config
+    if agent.multi_agent:
+        env = parallel_factory(cfg["env"], cfg.get("env_kwargs"))()
+        pol = agent.parallel_policy(env)
+    else:
+        env = gym_factory(cfg["env"], cfg.get("env_kwargs"))()
+        pol = agent.central_policy()
+    try:
+        _base(env)
+    except TypeError:
+        # not a dobs_envs environment (e.g. Pendulum-v1): returns only
+        rets = []
+        for k in range(episodes):
+            obs, _ = env.reset(seed=seed + k)
+            R, done = 0.0, False
+            while not done:
+                obs, r, term, trunc, _ = env.step(pol(obs))
+                R += float(r)
+                done = term or trunc
+            rets.append(R)
+        env.close()
+        return {"policy": agent.name, "episodes": episodes, "seeds": list(range(seed, seed + episodes)),
+                "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets))}
+    res = evaluate_policy(env, pol, episodes, seed, parallel=agent.multi_agent, progress=progress, desc=agent.name)
+    env.close()
+    return {"policy": agent.name, **summarise(res)}
