@@ -396,7 +396,7 @@ def check_matching(B, B_v, *, rtol: float = MATCHING_RTOL) -> np.ndarray:
             f"B_v is not in the range of B: the least-squares X_v leaves the relative residual "
             f"||B X_v - B_v|| / ||B_v|| = {res:.3g} > {rtol:g}; the unknown input acts along "
             f"{dirs.shape[1]} direction(s) no control channel reaches, e.g. "
-            f"{np.array2string(dirs[:, 0], precision=4, suppress_small=True)}.",
+            f"{np.array2string(dirs[:, 0], precision=4, suppress_small=True, max_line_width=10**6)}.",
             res,
             dirs,
         )
@@ -459,7 +459,7 @@ def check_collective_detectability(T_d_list: Sequence, n: int, *, tol: float | N
         raise CollectiveDetectabilityError(
             f"sum_i Im T_id has dimension {dim} < n = {n}; {n - dim} state direction(s) "
             "cannot be reconstructed by any observer node, e.g. "
-            f"{np.array2string(missing[:, 0], precision=4, suppress_small=True)} "
+            f"{np.array2string(missing[:, 0], precision=4, suppress_small=True, max_line_width=10**6)} "
             "(attribute missing_directions holds an orthonormal basis). Give some node a "
             "measurement or knowledge of the inputs acting on these directions.",
             dim,
