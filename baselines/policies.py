@@ -1,0 +1,167 @@
+"""Reference policies acting through the environment API (the same observations RL agents get).
+
+The paper's separation-based controllers read, from each agent's observation,
+the estimate ``xhat_{links[k]}`` its observer node sends over the C-O link
+(component ``"xhat"``) and, for tracking, its reference command ``r^k``
+(component ``"r"``); see :mod:`dobs_envs.envs.observation` for the layout.
+
+- :class:`SeparationPolicy` -- ``policy(observations) -> actions`` for the
+  PettingZoo parallel environments:
+
+  * ``"feedback"`` (Theorem lfthm, eq. linearfeedback): ``u^k = K^k xhat``
+  * ``"tracking"`` (Theorem reftrackthm): ``u^k = K^k xhat + r^k``
+  * ``"sliding_mode"`` (Theorem smthm, eq. idealslidinglaw): ``u^k = K^k xhat - beta^k h((B^k)^T P xhat)``
+  * ``"adaptive_sliding_mode"`` (Theorem adsmthm, eqs. hepsfunc, adlawbeta):
+    ``u^k = K^k xhat - beta^k h_eps((B^k)^T P xhat)`` with ``beta^k`` kept
+    internally and advanced once per call by the exact solution of the
+    leakage law over one control period (as :mod:`baselines.paper`); call
+    :meth:`SeparationPolicy.reset` at every episode start.
+  * ``"open_loop"`` (NE1): the scenario's prescribed input ``u(t)``, with ``t``
+    counted internally from the control period (reset it per episode).
+
+- :class:`CentralizedSeparationPolicy` -- ``policy(obs) -> action`` for the
+  Gymnasium environments (``dobs_envs/Tracking-v0`` ...): splits the
+  concatenated observation into the agents' observations, acts, and stacks the
+  inputs.
+
+Actions are float64 (the environments accept any float dtype and simulate in
+float64; out-of-range values would be clipped by the environment).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["SeparationPolicy", "CentralizedSeparationPolicy", "ZeroPolicy"]
+
+
+def _unwrap(env):
+    base = getattr(env, "unwrapped", env)
+    while not hasattr(base, "scenario") and hasattr(base, "env"):
+        base = base.env
+    if not hasattr(base, "scenario"):
+        raise TypeError(f"{type(env).__name__} is not a dobs_envs environment (no .scenario)")
+    return base
+
+
+class SeparationPolicy:
+    """The scenario's paper controller acting on the agents' observations.
+
+    Parameters
+    ----------
+    env : a dobs_envs parallel environment (or a wrapper of one). Its
+        observation must contain the ``"xhat"`` component (and ``"r"`` for tracking).
+    kind : controller law (default: the scenario's ``controller``; the tracking
+        environment's is ``"tracking"``, the disturbance-rejection one's
+        ``"adaptive_sliding_mode"``, the heterogeneous-MAS one's ``"feedback"``).
+    """
+
+    KINDS = ("open_loop", "feedback", "tracking", "sliding_mode", "adaptive_sliding_mode")
+
+    def __init__(self, env, kind: str | None = None):
+        base = _unwrap(env)
+        sc = base.scenario
+        kind = kind or sc.controller
+        if kind not in self.KINDS:
+            raise ValueError(f"kind must be one of {self.KINDS}, got {kind!r}")
+        if kind != "open_loop" and sc.K is None:
+            raise ValueError(f"{kind!r} policy needs the scenario's feedback gain K")
+        if kind in ("sliding_mode", "adaptive_sliding_mode") and sc.P is None:
+            raise ValueError(f"{kind!r} policy needs the scenario's sliding-mode matrix P")
+        if kind == "open_loop" and sc.prescribed_input is None:
+            raise ValueError("'open_loop' policy needs the scenario's prescribed_input")
+        self.kind = kind
+        self.agents = list(base.possible_agents)
+        self.period = float(base.control_period)
+        self._slices = tuple(base.channel_slices)
+        self._xhat, self._r, self._K, self._BtP = {}, {}, {}, {}
+        B = sc.B
+        for k, a in enumerate(self.agents):
+            lay = base.observation_layout(a)
+            sl = self._slices[k]
+            if kind != "open_loop":
+                if "xhat" not in lay:
+                    raise ValueError(f"the {kind!r} policy reads 'xhat' from the observation; agent {a!r}'s observation has {list(lay)}")
+                self._xhat[a] = lay["xhat"]
+                self._K[a] = np.ascontiguousarray(sc.K[sl])
+            if kind == "tracking":
+                if "r" not in lay:
+                    raise ValueError(f"the tracking policy reads 'r' from the observation; agent {a!r}'s observation has {list(lay)}")
+                self._r[a] = lay["r"]
+            if kind in ("sliding_mode", "adaptive_sliding_mode"):
+                self._BtP[a] = np.ascontiguousarray(B[:, sl].T @ sc.P)
+        self._index = {a: k for k, a in enumerate(self.agents)}
+        self.beta0, self.sigma_beta, self.phi_beta, self.epsilon = sc.beta0, sc.sigma_beta, sc.phi_beta, sc.epsilon
+        s, T = self.sigma_beta, self.period
+        self._decay = math.exp(-s * T)
+        self._gain = (1.0 - self._decay) / s if s > 0 else T
+        self._signal = sc.prescribed_input
+        self.reset()
+
+    def reset(self) -> None:
+        """Start of an episode: ``beta^k = beta^k(0)``, open-loop clock ``t = 0``."""
+        self.beta = np.full(len(self.agents), self.beta0)
+        self._steps = 0
+
+    def __call__(self, observations: dict) -> dict:
+        out = {}
+        kind = self.kind
+        if kind == "open_loop":
+            u = self._signal(self._steps * self.period)
+            self._steps += 1
+            return {a: u[self._slices[self._index[a]]].copy() for a in observations}
+        new_beta = self.beta.copy()
+        for a, o in observations.items():
+            xh = np.asarray(o[self._xhat[a]], dtype=np.float64)
+            u = self._K[a] @ xh
+            if kind == "tracking":
+                u = u + np.asarray(o[self._r[a]], dtype=np.float64)
+            elif kind != "feedback":
+                k = self._index[a]
+                w = self._BtP[a] @ xh
+                nw = math.sqrt(float(w @ w))
+                b = self.beta[k]
+                if kind == "sliding_mode":  # eq. (hfunc)
+                    u = u - (b * w / nw if nw > 0 else 0.0 * w)
+                else:  # eq. (hepsfunc), then eq. (adlawbeta) over one period
+                    h = w / nw if b * nw > self.epsilon else b * w / self.epsilon
+                    u = u - b * h
+                    new_beta[k] = self._decay * b + self._gain * self.phi_beta * nw
+            out[a] = u
+        self.beta = new_beta
+        self._steps += 1
+        return out
+
+
+class CentralizedSeparationPolicy:
+    """:class:`SeparationPolicy` for the centralised Gymnasium environments: ``policy(obs) -> action``."""
+
+    def __init__(self, env, kind: str | None = None):
+        genv = getattr(env, "unwrapped", env)
+        if not hasattr(genv, "parallel_env"):
+            raise TypeError(f"{type(env).__name__} is not a centralised dobs_envs Gymnasium environment")
+        self.genv = genv
+        self.policy = SeparationPolicy(genv.parallel_env, kind)
+
+    def reset(self) -> None:
+        self.policy.reset()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        g = self.genv
+        acts = self.policy({a: obs[sl] for a, sl in zip(g.agents, g.agent_observation_slices)})
+        return np.concatenate([acts[a] for a in g.agents])
+
+
+class ZeroPolicy:
+    """``u = 0`` for every agent (open loop; a lower baseline)."""
+
+    def __init__(self, env):
+        base = _unwrap(env)
+        self._w = {a: base.action_space(a).shape[0] for a in base.possible_agents}
+
+    def reset(self) -> None:
+        pass
+
+    def __call__(self, observations: dict) -> dict:
+        return {a: np.zeros(self._w[a]) for a in observations}

@@ -1,0 +1,126 @@
+"""``hetero_mas_v0``: rendezvous of NE1's heterogeneous agents through distributed observers."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .base import DObsParallelEnv
+
+__all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND"]
+
+#: Per-agent input bounds of hetero_mas_v0: 1.5 x the largest |u_i| of the reference
+#: (rendezvous LQR on the own estimate) policy over 20 seeded episodes of the default
+#: initial-state distribution at the default control period, rounded up to a multiple of 5
+#: (measured: see HeteroMASEnv docstring).
+NE1_ACTION_BOUND = (5.0, 5.0, 10.0, 10.0, 15.0)
+
+
+class HeteroMASEnv(DObsParallelEnv):
+    """Rendezvous of heterogeneous agents with distributed estimation (NE1 agents; PettingZoo ``ParallelEnv``).
+
+    ## Description
+
+    The five agents of the paper's Section NE1 (eq. HMAS): two integrators,
+    two double integrators and a triple integrator, ``x = col(breve x_i)``
+    (``n = 9``). Agent ``controller_i`` controls its own scalar input ``u_i``
+    and is co-located with observer node ``i``, which measures the agent's
+    position ``y_i = breve C_i breve x_i``, knows only ``u_i`` and runs the
+    MAS form of the distributed observer (eq. obidynamicMAS with NE1's
+    ``breve L_i`` and adaptive-law constants) over the ring O-O graph
+    0-1-2-3-4-0; by Theorem HMASthm every agent reconstructs the state of
+    *all* agents. Task: **rendezvous** -- the positions (first state component
+    of each agent) agree while velocities/accelerations settle. The reference
+    policy applies the rendezvous LQR gain to the agent's own estimate,
+    ``u_i = K_i xhat_i`` (:func:`dobs_envs.scenarios.mas_tasks.rendezvous_lqr`,
+    ``rho = 1e-3`` keeps ``A + B K`` Hurwitz so Theorem lfthm applies; the
+    meeting point drifts slowly, time constant ~21 s, towards the origin).
+
+    ## Action Space
+
+    Agent ``controller_i``: ``Box(-b_i, b_i, (1,), float32)``,
+    ``b = (5, 5, 10, 10, 15)`` (:data:`NE1_ACTION_BOUND`); clipped; NaN/inf,
+    wrong shapes and unknown agents raise ``ValueError``.
+
+    ## Observation Space
+
+    Agent ``controller_i`` (node ``i``): ``Box(-inf, inf, (30,), float32)``::
+
+        [0:1]    y_i        its own position
+        [1:10]   xhat_i     its estimate of all agents' states
+        [10:28]  neighbours the estimates of its two ring neighbours
+        [28:30]  mask       1 per real neighbour slot
+
+    ``observation="full"`` adds the privileged ``x``, all estimates, gains and
+    ``t``. ``state()``: ``(x, xhat_0..xhat_4)`` (54 values).
+
+    ## Rewards
+
+    Shared ``-(x'Qx + sum_i r u_i^2) * T`` with the rendezvous weight
+    ``Q = S^T Pi S + 0.1 (I - S^T S)`` (``x'Qx = sum_i (p_i - pbar)^2 + 0.1 ||rest||^2``,
+    :func:`~dobs_envs.scenarios.mas_tasks.rendezvous_cost`) and ``r = 1``.
+
+    ## Starting State
+
+    ``x(0) = x0 + U[-1, 1]^9`` around NE1's ``x0 = (-1, -2, -3, -4, 5, 4, 3, 2, 1)``;
+    ``xhat_i(0) = 0``, ``gamma_i(0) = gamma_is(0) = 0.1``.
+
+    ## Episode End
+
+    Terminated when ``||x|| > state_bound`` (1e3); truncated after ``max_cycles``
+    (default 600 control steps = NE1's 30 s).
+
+    ## Info
+
+    Per agent: ``estimation_error`` of its node, ``tracking_error`` (``||x||``),
+    ``disagreement`` (``||p - pbar 1||``, the rendezvous error, also plotted by
+    ``render()``), ``gamma``, ``gamma_s``.
+
+    ## Arguments
+
+    ``hetero_mas_v0.parallel_env(q_rest=0.1, r=1.0, rho=1e-3, dt=1e-3, substeps=50,
+    max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
+    R=None, action_bound=None, init_noise=None, state_bound=1e3, render_mode=None,
+    scenario=None)``; ``q_rest``, ``r``, ``rho`` parametrise the task
+    (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
+    takes any multi-agent Scenario (``mas_agents``).
+
+    ## Version History
+
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
+    EXTRA_OPTIONS = {"q_rest": 0.1, "r": 1.0, "rho": 1e-3}
+    TASK_ERROR_LABEL = r"$\|p - \bar p\,1\|$"
+
+    def _default_scenario(self, opts):
+        from ..scenarios.mas_tasks import rendezvous_scenario
+
+        return rendezvous_scenario(q_rest=opts["q_rest"], r=opts["r"], rho=opts["rho"])
+
+    def _check_scenario(self, sc, opts):
+        if sc.mas_agents is None:
+            raise ValueError(f"hetero_mas_v0 needs a multi-agent scenario (Scenario.mas_agents); {sc.name!r} is not one")
+        if opts["scenario"] is not None and any(k in self._given for k in ("q_rest", "r", "rho")):
+            raise ValueError("q_rest, r and rho parametrise the default rendezvous scenario; they cannot be combined with scenario=")
+        from ..scenarios.mas_tasks import position_indices
+
+        self._pos = np.asarray(sc.metadata.get("positions", position_indices(sc)), dtype=np.intp)
+
+    def __init__(self, **kwargs):
+        self._given = set(kwargs)
+        super().__init__(**kwargs)
+
+    def _default_action_bound(self, sc):
+        if self.options["scenario"] is None and all(k not in self._given for k in ("q_rest", "r", "rho")):
+            return np.array(NE1_ACTION_BOUND)
+        return super()._default_action_bound(sc)
+
+    def _task_error(self) -> float:
+        p = self._sim.x[0, self._pos]
+        d = p - p.mean()
+        return math.sqrt(float(d @ d))
+
+    def _shared_info(self) -> dict:
+        return {"disagreement": self._task_error()}

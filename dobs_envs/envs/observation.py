@@ -1,0 +1,160 @@
+"""Per-agent observation layouts: one flat vector gathered from a per-step feature vector.
+
+Every control step the environment writes, once, a flat *feature vector* ``f``
+holding everything any agent may observe::
+
+    f = [ y (sum_i p_i) | xhat_0..xhat_{N-1} (N n) | x (n) | x_r (n) | gamma (N) | gamma_s (N)
+          | r (m) | v (m_v) | t (1) | 0 (1) | 1 (1) ]
+
+and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
+gather, which also copies). Padding entries point at the constant 0, mask
+entries at the constant 1 (or 0 for padding). This keeps the per-step cost at
+one gather per agent whatever components are selected.
+
+Components an agent ``k`` (linked observer node ``i = links[k]``) can observe:
+
+=============  ===============  ================================================================
+name           size             content
+=============  ===============  ================================================================
+``y``          ``p_i``          local measured output ``y_i = C_i x`` (eq. localmeasure)
+``xhat``       ``n``            the estimate ``xhat_i`` it receives over its C-O link (eq. hatxieq)
+``neighbors``  ``D n``          estimates ``xhat_j`` of node ``i``'s O-O neighbours ``j`` (sorted
+                                by index), zero-padded to ``D`` = the largest number of neighbours
+                                of any node
+``mask``       ``D``            1 for a real neighbour slot, 0 for padding
+``r``          ``m_k``          its reference command ``r^k(t)`` (eq. refxdy; tracking only)
+``x``          ``n``            true plant state (privileged, debugging)
+``x_r``        ``n``            reference-model state (privileged; tracking only)
+``estimates``  ``N n``          all observer nodes' estimates (privileged)
+``gamma``      ``N``            adaptive gains ``gamma_i`` of eq. (gammaiis)
+``gamma_s``    ``N``            adaptive gains ``gamma_is`` of eq. (gammaiis)
+``v``          ``m_v``          unknown input ``v`` (privileged; only when ``B_v != 0``)
+``time``       ``1``            simulated time ``t`` (s)
+=============  ===============  ================================================================
+
+Presets: ``"local"`` = ``(y, xhat, neighbors, mask, r)`` (``r`` only with a
+reference), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s, v, time)``
+(each only where it exists).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components"]
+
+COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
+LOCAL = ("y", "xhat", "neighbors", "mask", "r")
+FULL = LOCAL + ("x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
+#: components that exist only in some systems (silently dropped from the presets)
+_OPTIONAL = {"r": "has_reference", "x_r": "has_reference", "v": "has_unknown_input"}
+
+
+def resolve_components(spec, *, has_reference: bool, has_unknown_input: bool) -> tuple:
+    """The tuple of component names selected by ``spec`` ("local", "full" or a sequence of names)."""
+    avail = {"has_reference": has_reference, "has_unknown_input": has_unknown_input}
+    if isinstance(spec, str):
+        if spec not in ("local", "full"):
+            raise ValueError(f"observation must be 'local', 'full' or a sequence of component names from {COMPONENTS}, got {spec!r}")
+        names = LOCAL if spec == "local" else FULL
+        return tuple(c for c in names if c not in _OPTIONAL or avail[_OPTIONAL[c]])
+    try:
+        names = tuple(spec)
+    except TypeError:
+        raise ValueError(f"observation must be 'local', 'full' or a sequence of component names, got {spec!r}") from None
+    if not names:
+        raise ValueError("observation must select at least one component")
+    for c in names:
+        if c not in COMPONENTS:
+            raise ValueError(f"unknown observation component {c!r}; valid components are {COMPONENTS}")
+        if c in _OPTIONAL and not avail[_OPTIONAL[c]]:
+            what = "a reference signal" if _OPTIONAL[c] == "has_reference" else "an unknown input (B_v)"
+            raise ValueError(f"observation component {c!r} needs {what}, which this system does not have")
+    if len(set(names)) != len(names):
+        raise ValueError(f"observation components must not repeat, got {names}")
+    return names
+
+
+class FeatureLayout:
+    """Positions of the quantities in the feature vector ``f`` and the per-agent gathers.
+
+    Parameters
+    ----------
+    p : (N,) output sizes ``p_i``; n : state size; m : input size; m_v : unknown-input size.
+    neighbors : list of sorted neighbour arrays per node.
+    links : (K,) linked observer node per controller node.
+    channel_slices : per controller node, its columns of ``u`` (and ``r``).
+    components : tuple of selected component names.
+    """
+
+    def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components):
+        N = len(p)
+        self.N, self.n, self.m, self.m_v = N, n, m, m_v
+        pos = 0
+
+        def take(size):
+            nonlocal pos
+            s = slice(pos, pos + size)
+            pos += size
+            return s
+
+        y_off = np.concatenate([[0], np.cumsum(p)]).astype(int)
+        self.y = take(int(y_off[-1]))
+        self.y_nodes = [slice(self.y.start + y_off[i], self.y.start + y_off[i + 1]) for i in range(N)]
+        self.xhat = take(N * n)
+        self.x = take(n)
+        self.x_r = take(n)
+        self.gamma = take(N)
+        self.gamma_s = take(N)
+        self.r = take(m)
+        self.v = take(m_v)
+        self.time = take(1)
+        self.zero = take(1).start
+        self.one = take(1).start
+        self.size = pos
+        self.max_neighbors = max((len(nb) for nb in neighbors), default=0)
+        self.components = tuple(components)
+        D = self.max_neighbors
+        self.agent_index = []
+        self.agent_layout = []
+        for k, i in enumerate(links):
+            parts, layout, start = [], {}, 0
+            nb = list(neighbors[i])
+            for c in components:
+                if c == "y":
+                    idx = np.arange(self.y_nodes[i].start, self.y_nodes[i].stop)
+                elif c == "xhat":
+                    idx = self.xhat.start + i * n + np.arange(n)
+                elif c == "neighbors":
+                    idx = np.full(D * n, self.zero)
+                    for s, j in enumerate(nb):
+                        idx[s * n:(s + 1) * n] = self.xhat.start + j * n + np.arange(n)
+                elif c == "mask":
+                    idx = np.array([self.one if s < len(nb) else self.zero for s in range(D)], dtype=int)
+                elif c == "r":
+                    sl = channel_slices[k]
+                    idx = self.r.start + np.arange(sl.start, sl.stop)
+                elif c == "estimates":
+                    idx = np.arange(self.xhat.start, self.xhat.stop)
+                else:  # x, x_r, gamma, gamma_s, v, time
+                    s_ = getattr(self, c)
+                    idx = np.arange(s_.start, s_.stop)
+                idx = np.asarray(idx, dtype=np.intp)
+                layout[c] = slice(start, start + idx.size)
+                start += idx.size
+                parts.append(idx)
+            self.agent_index.append(np.concatenate(parts) if parts else np.zeros(0, dtype=np.intp))
+            self.agent_layout.append(layout)
+        self.all_index = np.concatenate(self.agent_index)
+
+    def bounds(self, k: int, dtype):
+        """``(low, high)`` of agent ``k``'s observation (mask entries in [0, 1], the rest unbounded)."""
+        L = self.agent_index[k].size
+        low = np.full(L, -np.inf, dtype=dtype)
+        high = np.full(L, np.inf, dtype=dtype)
+        lay = self.agent_layout[k]
+        if "mask" in lay:
+            low[lay["mask"]] = 0.0
+            high[lay["mask"]] = 1.0
+        if "time" in lay:
+            low[lay["time"]] = 0.0
+        return low, high

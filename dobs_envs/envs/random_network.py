@@ -1,0 +1,120 @@
+"""``random_network_v0``: a seeded random system from :mod:`dobs_envs.scenarios.random`."""
+from __future__ import annotations
+
+from .base import DObsParallelEnv
+
+__all__ = ["RandomNetworkEnv"]
+
+_PLANT_KEYS = ("n_states", "n_controllers", "n_observers", "unknown_input", "controller")
+_MAS_KEYS = ("n_agents", "controller")
+
+
+class RandomNetworkEnv(DObsParallelEnv):
+    """Distributed observer-based control of a seeded random system (PettingZoo ``ParallelEnv``).
+
+    ## Description
+
+    The system is drawn once, at construction, by the scenario layer's
+    seeded generator (:mod:`dobs_envs.scenarios.random`; same options and
+    ``system_seed`` give the bit-identical system; every draw is verified
+    against Assumptions 3-6 and the observer design is built):
+
+    * ``kind="plant"`` (default, :func:`~dobs_envs.scenarios.random.random_plant_scenario`):
+      ``n_states`` (6) states, ``A = Q M Q^T`` with ``M`` in real Schur form whose
+      modes are drawn as: with probability 0.3 a complex pair
+      ``a +- ib``, ``a ~ U[-1, 0.5]``, ``b ~ U[0.2, 2]``; else a real eigenvalue,
+      exactly 0 with probability 0.25, else ``~ U[-1, 0.5]`` (at least one mode
+      with ``Re >= 0``); ``N(0, 0.5^2)`` couplings above the diagonal blocks;
+      ``Q`` Haar orthogonal. ``n_controllers`` (3) channels ``B^k`` with one
+      ``N(0, 1)`` column each; ``n_observers`` (4) nodes, each measuring a
+      random subset of the states (the subsets cover all states, so Assumption
+      6 holds) and knowing 1-2 random channels; the C-O link of channel ``k``
+      goes to a node that knows it. With ``unknown_input=True`` a matched
+      ``B_v = B X_v`` (``X_v`` ``m x 2`` Gaussian) driven by a harmonic exosystem
+      ``w ~ U[0.2, 1]`` rad/s, ``v0 ~ U[-1, 1]^2``. Reference controller:
+      ``"feedback"`` ``K = -B^T X`` from the ARE shifted by 0.2 (NE2's), or with an
+      unknown input ``"adaptive_sliding_mode"`` with NE3's constants.
+    * ``kind="mas"`` (:func:`~dobs_envs.scenarios.random.random_mas_scenario`):
+      ``n_agents`` (4) agents in companion form with state dimensions
+      ``U{1..3}``, one input and one output each, spectra as above, MAS observer
+      (eq. obidynamicMAS); agent ``i`` controls its own input; ``"feedback"``.
+
+    The O-O graph is ``graph`` (``"random"``: connected Erdos-Renyi with
+    ``edge_prob`` 0.3, seeded from the same stream; or ``"ring"``, ``"path"``,
+    ``"star"``, ``"complete"``). ``generator_kwargs`` passes any other generator
+    argument (e.g. ``{"measurement": "gaussian"}``).
+
+    ## Action Space
+
+    Agent ``controller_k``: ``Box(-b, b, (m_k,), float32)``; by default the
+    bounds are *calibrated* (``action_bound="auto"``): twice the largest
+    ``|u_j|`` the reference controller uses over 8 initial states of the
+    default distribution (first 10 s, fixed calibration seed), at least 1.
+    Clipped; NaN/inf, wrong shapes, unknown agents raise ``ValueError``.
+
+    ## Observation Space
+
+    As every dobs_envs env (``observation="local"``): ``[y_i, xhat_i,
+    neighbours (D n), mask (D), r^k if tracking]`` with ``i = links[k]`` and
+    ``D`` the largest number of O-O neighbours; the slices are given by
+    ``env.observation_layout(agent)``.
+
+    ## Rewards
+
+    ``-(e'Qe + u'Ru) * T`` with ``e = x`` (``x - x_r`` for a tracking
+    controller), ``Q = I``, ``R = I`` unless given.
+
+    ## Starting State
+
+    ``x(0) ~ U[-1, 1]^n`` (the generator's ``x0_scale``; ``init_noise=a`` instead
+    gives ``x0 + U[-a, a]^n`` around the generator's drawn ``x0``); ``z_i(0) = 0``,
+    ``gamma_i(0) = gamma_is(0) = 0.1``.
+
+    ## Episode End
+
+    Terminated when ``||x|| > state_bound`` (1e3); truncated after
+    ``max_cycles`` (default 400 control steps = 20 s).
+
+    ## Arguments
+
+    ``random_network_v0.parallel_env(kind="plant", system_seed=0, n_states=6,
+    n_controllers=3, n_observers=4, n_agents=4, graph="random", edge_prob=0.3,
+    unknown_input=False, controller=None, generator_kwargs=None, <common options>)``
+    (common options as ``tracking_v0``; ``scenario=`` is not accepted here).
+
+    ## Version History
+
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
+    EXTRA_OPTIONS = {"kind": "plant", "system_seed": 0, "n_states": 6, "n_controllers": 3, "n_observers": 4,
+                     "n_agents": 4, "graph": "random", "edge_prob": 0.3, "unknown_input": False,
+                     "controller": None, "generator_kwargs": None}
+
+    def __init__(self, **kwargs):
+        if "scenario" in kwargs:
+            raise TypeError("random_network_v0 draws its system from the generator; use dobs_envs.envs.make_parallel_env(scenario) for your own")
+        self._given = set(kwargs)
+        super().__init__(**kwargs)
+
+    def _default_scenario(self, opts):
+        from ..scenarios.random import random_mas_scenario, random_plant_scenario
+
+        kind = opts["kind"]
+        gk = dict(opts["generator_kwargs"] or {})
+        common = dict(graph=opts["graph"], edge_prob=opts["edge_prob"], **gk)
+        if opts["controller"] is not None:
+            common["controller"] = opts["controller"]
+        if kind == "plant":
+            bad = [k for k in ("n_agents",) if k in self._given]
+            if bad:
+                raise TypeError(f"{bad} only apply to kind='mas'")
+            return random_plant_scenario(opts["n_states"], opts["n_controllers"], opts["n_observers"],
+                                         seed=opts["system_seed"], unknown_input=opts["unknown_input"], **common)
+        if kind == "mas":
+            bad = [k for k in ("n_states", "n_controllers", "n_observers", "unknown_input") if k in self._given]
+            if bad:
+                raise TypeError(f"{bad} only apply to kind='plant' (kind='mas' takes n_agents)")
+            return random_mas_scenario(opts["n_agents"], seed=opts["system_seed"], **common)
+        raise ValueError(f"kind must be 'plant' or 'mas', got {kind!r}")
