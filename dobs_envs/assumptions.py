@@ -35,6 +35,7 @@ import numpy as np
 
 from .design.subspaces import (
     STABILITY_TOL,
+    stable_mask,
     numerical_rank,
     orth,
     orth_complement,
@@ -52,6 +53,8 @@ __all__ = [
     "GraphNotConnectedError",
     "CollectiveDetectabilityError",
     "uncontrollable_eigenvalues",
+    "controllable_subspace",
+    "pbh_rank",
     "check_exosystem_bounded",
     "check_stabilizable",
     "check_detectable",
@@ -100,11 +103,21 @@ class AssumptionError(ValueError):
     assumption: int = 0
     title: str = ""
 
-    def __init__(self, detail: str):
+    #: True when the paper's assumption itself holds and only a stronger
+    #: requirement of the caller (a stability ``margin``) fails.
+    margin_only: bool = False
+
+    def __init__(self, detail: str, *, margin_only: bool = False):
         self.detail = detail
-        super().__init__(
-            f"Assumption {self.assumption} ({self.title}) of Cao & Yin fails: {detail}"
-        )
+        self.margin_only = bool(margin_only)
+        if margin_only:
+            msg = (
+                f"Assumption {self.assumption} ({self.title}) of Cao & Yin holds, but the "
+                f"stronger stability-margin requirement fails: {detail}"
+            )
+        else:
+            msg = f"Assumption {self.assumption} ({self.title}) of Cao & Yin fails: {detail}"
+        super().__init__(msg)
 
 
 class UnboundedExosystemError(AssumptionError):
@@ -120,9 +133,9 @@ class UnboundedExosystemError(AssumptionError):
     assumption = 1
     title = "bounded unknown input v"
 
-    def __init__(self, detail: str, eigenvalues):
+    def __init__(self, detail: str, eigenvalues, *, margin_only: bool = False):
         self.eigenvalues = np.asarray(eigenvalues)
-        super().__init__(detail)
+        super().__init__(detail, margin_only=margin_only)
 
 
 class StabilizabilityError(AssumptionError):
@@ -138,9 +151,9 @@ class StabilizabilityError(AssumptionError):
     assumption = 3
     title = "(A, B) stabilizable"
 
-    def __init__(self, detail: str, eigenvalues):
+    def __init__(self, detail: str, eigenvalues, *, margin_only: bool = False):
         self.eigenvalues = np.asarray(eigenvalues)
-        super().__init__(detail)
+        super().__init__(detail, margin_only=margin_only)
 
 
 class DetectabilityError(AssumptionError):
@@ -156,9 +169,9 @@ class DetectabilityError(AssumptionError):
     assumption = 6
     title = "collective strong detectability; per agent: (A_i, C_i) detectable"
 
-    def __init__(self, detail: str, eigenvalues):
+    def __init__(self, detail: str, eigenvalues, *, margin_only: bool = False):
         self.eigenvalues = np.asarray(eigenvalues)
-        super().__init__(detail)
+        super().__init__(detail, margin_only=margin_only)
 
 
 class MatchingConditionError(AssumptionError):
@@ -285,7 +298,7 @@ def uncontrollable_eigenvalues(A, B, tol: float | None = None) -> np.ndarray:
     return np.linalg.eigvals(Q2.T @ A @ Q2)
 
 
-def _pbh_rank(A: np.ndarray, B: np.ndarray, lam: complex, tol: float | None = None) -> int:
+def pbh_rank(A: np.ndarray, B: np.ndarray, lam: complex, tol: float | None = None) -> int:
     """Rank of ``[A - lam I, B]`` (complex SVD, threshold :func:`rank_tol`)."""
     n = A.shape[0]
     M = np.hstack([A - lam * np.eye(n), B.astype(complex)])
@@ -303,7 +316,9 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
     B : array_like, shape (n, m)
     margin : float, optional
         Require every uncontrollable eigenvalue to satisfy ``Re < -margin``
-        (``margin = shift`` is what the shifted ARE of NE2 needs). Marginal
+        (``margin = shift`` is what the shifted ARE of NE2 needs); if only
+        this stronger requirement fails, the error has ``margin_only = True``
+        and its message says that Assumption 3 itself holds. Marginal
         modes (``Re = 0``) always count as not stabilizable, with the
         tolerance :data:`~dobs_envs.design.subspaces.STABILITY_TOL`.
     tol : float, optional
@@ -322,12 +337,15 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
     if bad.size:
         bad = bad[np.argsort(-bad.real)]
+        margin_only = bool(np.all(stable_mask(bad, scale)))
         extra = f" (required stability margin Re < -{margin:g})" if margin else ""
         raise StabilizabilityError(
             f"the uncontrollable eigenvalues {_fmt_eigs(bad)} of A have {_fmt_bound(margin)}"
             f"{extra}; no input u = K x can move them (PBH: rank [A - lambda I, B] < n = {n}). "
-            "Add an input channel acting on these modes.",
+            + ("Use a smaller margin/shift." if margin_only else
+               "Add an input channel acting on these modes."),
             bad,
+            margin_only=margin_only,
         )
 
 
@@ -350,6 +368,7 @@ def check_detectable(A, C, *, margin: float = 0.0, tol: float | None = None, nam
             f"{name} is not detectable: the unobservable eigenvalues {_fmt_eigs(bad)} have "
             f"{_fmt_bound(margin)}{extra} (PBH: rank [A - lambda I; C] < n = {n}).",
             bad,
+            margin_only=bool(np.all(stable_mask(bad, scale))),
         )
 
 

@@ -16,6 +16,7 @@ from dobs_envs.assumptions import (
     check_exosystem_bounded,
     check_matching,
     check_stabilizable,
+    pbh_rank,
     uncontrollable_eigenvalues,
 )
 from dobs_envs.graphs import Graph, path_graph
@@ -47,8 +48,9 @@ def test_stabilizable_allows_stable_uncontrollable_mode():
     A = np.diag([1.0, -2.0])
     B = np.array([[1.0], [0.0]])
     check_stabilizable(A, B)  # -2 uncontrollable but stable
-    with pytest.raises(StabilizabilityError, match="Assumption 3"):
+    with pytest.raises(StabilizabilityError, match="Assumption 3 .* holds, but") as ei:
         check_stabilizable(A, B, margin=3.0)  # shifted ARE with s = 3 needs Re < -3
+    assert ei.value.margin_only
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -65,7 +67,7 @@ def test_stabilizability_failure_lists_unstable_uncontrollable(seed):
     with pytest.raises(StabilizabilityError) as ei:
         check_stabilizable(A, B)
     e = ei.value
-    assert e.assumption == 3
+    assert e.assumption == 3 and not e.margin_only
     assert "Assumption 3" in str(e) and "Cao & Yin fails" in str(e)
     ev = np.sort(e.eigenvalues.real)
     np.testing.assert_allclose(ev, [0.0, 0.0, 1.0], atol=1e-6)
@@ -73,6 +75,9 @@ def test_stabilizability_failure_lists_unstable_uncontrollable(seed):
     np.testing.assert_allclose(
         np.sort(uncontrollable_eigenvalues(A, B).real), [-3.0, 0.0, 0.0, 1.0], atol=1e-6
     )
+    # independent PBH rank test at the (simple) eigenvalues: +1, -3 lose rank, +2 does not
+    assert pbh_rank(A, B, 1.0) == 4 and pbh_rank(A, B, -3.0) == 4
+    assert pbh_rank(A, B, 2.0) == 5
 
 
 def test_imaginary_axis_uncontrollable_mode_not_stabilizable():
