@@ -299,8 +299,14 @@ def uncontrollable_eigenvalues(A, B, tol: float | None = None) -> np.ndarray:
 
 
 def pbh_rank(A: np.ndarray, B: np.ndarray, lam: complex, tol: float | None = None) -> int:
-    """Rank of ``[A - lam I, B]`` (complex SVD, threshold :func:`rank_tol`)."""
+    """PBH rank of ``[A - lam I, B]`` (complex SVD, threshold :func:`rank_tol`).
+
+    ``lam`` is an uncontrollable eigenvalue iff the rank is ``< n``. Reliable
+    for simple eigenvalues; for defective ones use :func:`uncontrollable_eigenvalues`.
+    """
+    A = _square(A)
     n = A.shape[0]
+    B = _as_matrix(B, "B", rows=n)
     M = np.hstack([A - lam * np.eye(n), B.astype(complex)])
     s = np.linalg.svd(M, compute_uv=False)
     return int(np.sum(s > rank_tol(s, M.shape, tol)))
