@@ -116,8 +116,10 @@ def metrics(sc, traj: Trajectory, dt: float) -> dict:
     return {
         "scenario": sc.name,
         "final_estimation_error": float(np.max(traj.est_err[-1])),
-        "final_tracking_error": float(traj.tracking_error[-1]),
-        "error_kind": "tracking ||x - x_r||" if traj.x_r is not None else "stabilisation ||x||",
+        # NE1 applies prescribed open-loop inputs: there is no tracking/stabilisation objective
+        "final_tracking_error": None if sc.controller == "open_loop" else float(traj.tracking_error[-1]),
+        "error_kind": ("none (open-loop inputs)" if sc.controller == "open_loop"
+                       else "tracking ||x - x_r||" if traj.x_r is not None else "stabilisation ||x||"),
         "max_gamma": float(np.max(traj.gamma)),
         "max_gamma_s": float(np.max(traj.gamma_s)),
         "max_beta": None if traj.beta is None else float(np.max(traj.beta)),
@@ -206,7 +208,7 @@ def _run(args) -> int:
     res = reproduce(names, args.out, t_end=args.t_end, dt=args.dt, backend=args.backend, progress=not args.no_progress)
     for name, met in res.items():
         print(f"{name:13s} final_estimation_error={met['final_estimation_error']:.4g}  "
-              f"final_tracking_error={met['final_tracking_error']:.4g}  max_gamma={met['max_gamma']:.4g}  "
+              f"final_tracking_error={met['final_tracking_error']}  max_gamma={met['max_gamma']:.4g}  "
               f"max_gamma_s={met['max_gamma_s']:.4g}  max_beta={met['max_beta']}  "
               f"TV_u(last 5 s)={met['control_total_variation_last_5s']:.4g}")
     print(f"wrote {args.out}")
