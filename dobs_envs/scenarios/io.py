@@ -253,7 +253,7 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     else:
         defaults = {}
     required = ["name", "graph", "x0"] + ([] if agents else ["A", "channels", "C", "known", "links"])
-    missing = [k for k in required if k not in d]
+    missing = sorted(k for k in required if k not in d)
     if missing:
         raise ScenarioFileError(source, None, f"missing required key(s) {missing}")
 
@@ -284,11 +284,11 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     controller = kw.get("controller", "feedback")
     if "K_shift" in d and "K" in d:
         raise ScenarioFileError(source, "K_shift", "only applies when K is omitted (K is given)")
+    A = _array(kw["A"], source, "A")
     try:
-        A = _array(kw["A"], source, "A", ndim=2)
+        if A.ndim != 2 or A.shape[0] != A.shape[1] or A.shape[0] == 0:
+            raise ValueError
         B = np.hstack([b.reshape(A.shape[0], -1) if b.ndim == 1 else b for b in kw["channels"]])
-    except ScenarioFileError:
-        raise
     except ValueError:
         A = B = None  # shapes inconsistent: Scenario's validation below names the field
     if "K" not in kw and controller != "open_loop" and A is not None:
@@ -297,15 +297,17 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
             _, kw["K"] = shifted_are_feedback(A, B, shift=float(shift))
         except (TypeError, ValueError) as exc:
             raise ScenarioFileError(source, "K", f"omitted, and the shifted ARE (K_shift = {shift}) failed: {exc}") from None
-    if "P" not in kw and controller in _SLIDING and "K" in kw and A is not None:
+    K_arr = _array(kw["K"], source, "K") if "K" in kw else None
+    if ("P" not in kw and controller in _SLIDING and A is not None and K_arr is not None
+            and K_arr.shape == (B.shape[1], A.shape[0])):  # else Scenario names the bad K
         try:
-            kw["P"] = lyapunov_P(A + B @ _array(kw["K"], source, "K", ndim=2))
+            kw["P"] = lyapunov_P(A + B @ K_arr)
         except ValueError as exc:
             raise ScenarioFileError(source, "P", f"omitted, and (A + BK)^T P + P (A + BK) = -I failed: {exc}") from None
     try:
         return Scenario(**kw)
     except (TypeError, ValueError) as exc:
-        m = re.match(r"Scenario\.(\w+)", str(exc))
+        m = re.match(r"Scenario\.(\w+(?:\[\d+\])?(?:\.\w+)?)", str(exc))
         raise ScenarioFileError(source, m.group(1) if m else None, str(exc)) from None
 
 
