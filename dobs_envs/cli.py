@@ -12,7 +12,11 @@ import argparse
 import importlib
 import sys
 
-_SUBCOMMAND_MODULES = ("dobs_envs.reproduce", "agents.cli")
+#: module -> the sub-commands it registers (used for a helpful stub when its import fails)
+_SUBCOMMAND_MODULES = {
+    "dobs_envs.reproduce": ("reproduce",),
+    "agents.cli": ("train", "evaluate", "benchmark"),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -21,13 +25,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Distributed-observer control benchmark (Cao & Yin).",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in _SUBCOMMAND_MODULES:
+    for name, commands in _SUBCOMMAND_MODULES.items():
         try:
             module = importlib.import_module(name)
-        except ImportError as exc:  # e.g. the rl extra is not installed
+        except ImportError as exc:  # e.g. the rl extra (torch, stable-baselines3) is not installed
             missing = getattr(exc, "name", None) or str(exc)
-            stub = sub.add_parser(name.rsplit(".", 1)[-1], help=f"unavailable: {missing}")
-            stub.set_defaults(func=lambda args, _m=missing: sys.exit(f"dobs-envs: missing dependency {_m}; install dobs-envs[rl]"))
+            for command in commands:
+                stub = sub.add_parser(command, help=f"unavailable: missing {missing}")
+                stub.set_defaults(func=lambda args, _m=missing: sys.exit(
+                    f"dobs-envs: this command needs {_m}; install it with: pip install 'dobs-envs[rl]'"))
             continue
         module.add_parser(sub)
     return parser
