@@ -95,7 +95,10 @@ def check_contract(A, B, C, res: StrongDetectability):
 # ---------------------------------------------------------------------------
 # independent reference: geometric characterisation (minimal conditioned
 # invariant subspace S*, quotient pair, undetectable modes). Written here from
-# scratch so that it shares no code path with lemma2.py.
+# scratch so that it shares no code path with lemma2.py. It classifies
+# eigenvalues one by one, which is reliable for the random systems below
+# (their eigenvalues on the relevant subspaces are simple, or semisimple), not
+# for long Jordan chains (those are covered by dedicated tests).
 # ---------------------------------------------------------------------------
 def reference_subspace(A, B, C):
     n = A.shape[0]
@@ -216,6 +219,35 @@ def test_integrator_chain_hidden_by_unknown_input():
     res = strong_detectability(At, np.zeros((6, 0)), Ct)
     check_contract(At, np.zeros((6, 0)), Ct, res)
     assert projector_distance(res.T_d, Q.T[:, [5]]) <= EXACT_TOL
+
+
+def test_repeated_fixed_modes_regression():
+    """Upper-triangular system with eigenvalues -1, 0, 1 (multiplicity 3, 3, 4)
+    and fixed modes {-1: 3, 0: 3, 1: 1} on the unobservable subspace of the
+    step-6 pair. delta = 6 was obtained independently with exact rational
+    arithmetic (sympy: minimal conditioned invariant, quotient pair, generalised
+    eigenspaces). An earlier clustering rule lumped the +-1/||A|| eigenvalues
+    with the zeros and failed in the ARE; per-eigenvalue classification of the
+    defective clusters gives a wrong dimension."""
+    entries = [
+        (0, 2, -0.028245029046536814), (0, 4, -1.5370107544584528), (0, 5, 0.7267972921209221),
+        (0, 6, -2.0697872246834903), (0, 7, -1.2678337600287954), (1, 1, -1.0),
+        (1, 8, 1.5386033387847653), (2, 2, 1.0), (2, 6, 1.202175301965278),
+        (2, 8, -0.7379701525122472), (3, 3, -1.0), (3, 5, 0.4831277629189692),
+        (3, 6, -0.900216756352223), (3, 7, -0.7509194316998054), (3, 9, 0.7651473886023136),
+        (4, 7, 0.8365846766832413), (4, 8, -0.9428973627945718), (5, 5, 1.0),
+        (5, 7, 1.0341323831153797), (6, 6, -1.0), (7, 7, 1.0), (7, 8, -1.0803996922706354),
+        (8, 8, 1.0),
+    ]
+    A = np.zeros((10, 10))
+    for i, j, v in entries:
+        A[i, j] = v
+    B = np.array([[0.546767545720451, 0, -1.6005385819999012, 0, 0.6998502737845356,
+                   -0.07521714817468843, 0.21946274488935044, 0, 0, -2.1657776084105427]]).T
+    C = np.eye(10)[[5, 7]]
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == 6
 
 
 def test_stable_decoupled_state_and_input_driven_output():
@@ -373,7 +405,7 @@ systems = st.tuples(
 )
 
 
-@settings(max_examples=120, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(systems)
 def test_random_systems_contract_and_maximality(params):
     seed, n, p, m, kind = params
@@ -390,7 +422,7 @@ def test_random_systems_contract_and_maximality(params):
     assert projector_distance(res.T_d, ref) <= EXACT_TOL
 
 
-@settings(max_examples=30, derandomize=True, deadline=None)
+@settings(max_examples=20, derandomize=True, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(2, 6))
 def test_all_zero_input_equals_no_input(seed, n):
     rng = np.random.default_rng(seed)

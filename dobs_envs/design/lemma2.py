@@ -158,6 +158,11 @@ def _rank_factor(M: np.ndarray, tol: float | None):
     return Phi, Vt.T.copy(), r
 
 
+#: Largest spread (relative to the matrix norm) of a group of computed
+#: eigenvalues treated as one defective eigenvalue (see :func:`_eigen_clusters`).
+_CLUSTER_CAP = 1e-2
+
+
 def _eigen_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
     """Group computed eigenvalues that may come from one defective eigenvalue.
 
@@ -168,7 +173,10 @@ def _eigen_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
     of ``m`` eigenvalues is accepted as a cluster when every member lies within
     ``R_m = 2 * scale * (c*eps)^(1/m)`` of the mean of ``S`` (``c = 1e3``
     allows for the conditioning of the orthogonal transformations applied
-    before the eigenvalue solver). For each unassigned eigenvalue (most
+    before the eigenvalue solver), capped at ``_CLUSTER_CAP * scale`` so that
+    distinct eigenvalues of a large matrix are not lumped together (the cap
+    still covers Jordan chains up to length ~6 at ``|M| ~ 1``; the NE2 chains
+    have length 5). For each unassigned eigenvalue (most
     marginal first) the largest accepted set among its nearest unassigned
     neighbours is taken. Simple, well separated eigenvalues stay singletons.
     """
@@ -183,7 +191,7 @@ def _eigen_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
         for size in range(order.size, 1, -1):
             idx = order[:size]
             spread = np.max(np.abs(ev[idx] - ev[idx].mean()))
-            if spread <= 2.0 * scale * (1e3 * eps) ** (1.0 / size):
+            if spread <= scale * min(2.0 * (1e3 * eps) ** (1.0 / size), _CLUSTER_CAP):
                 chosen = idx
                 break
         clusters.append(chosen)
@@ -191,27 +199,30 @@ def _eigen_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
     return clusters
 
 
-def _classify_stable(ev: np.ndarray, scale: float) -> np.ndarray:
+def _classify_stable(ev: np.ndarray, scale: float):
     """Per-eigenvalue stability flag, decided cluster-wise by the cluster mean
-    with :func:`~dobs_envs.design.subspaces.stable_mask` (marginal = unstable)."""
+    with :func:`~dobs_envs.design.subspaces.stable_mask` (marginal = unstable),
+    and the cluster mean of each eigenvalue."""
     flags = np.zeros(ev.size, dtype=bool)
+    means = np.empty(ev.size, dtype=complex)
     for idx in _eigen_clusters(ev, scale):
-        flags[idx] = bool(stable_mask(np.array([ev[idx].mean()]), scale)[0])
-    return flags
+        means[idx] = ev[idx].mean()
+        flags[idx] = bool(stable_mask(means[idx][:1], scale)[0])
+    return flags, means
 
 
 def _unstable_invariant_subspace(M: np.ndarray, scale: float):
     """Orthonormal basis of the invariant subspace of ``M`` for its not-stable
     eigenvalues (Re >= -STABILITY_TOL*scale, marginal included), and the
-    eigenvalues (cluster means) of the stable remainder."""
+    cluster means of the stable remainder (all with Re < -STABILITY_TOL*scale)."""
     k = M.shape[0]
     if k == 0:
         return np.zeros((0, 0)), np.zeros(0, dtype=complex)
     ev = np.linalg.eigvals(M)
-    stable = _classify_stable(ev, scale)
+    stable, means = _classify_stable(ev, scale)
     n_unstable = int(np.sum(~stable))
     if n_unstable == 0:
-        return np.zeros((k, 0)), ev
+        return np.zeros((k, 0)), means
     if n_unstable == k:
         return np.eye(k), np.zeros(0, dtype=complex)
 
@@ -226,7 +237,7 @@ def _unstable_invariant_subspace(M: np.ndarray, scale: float):
             f"eigenvalues of the step-6 pair (expected {n_unstable}, got {sdim}); "
             "the system has eigenvalues too close to the imaginary axis"
         )
-    return Zs[:, :sdim].copy(), ev[stable]
+    return Zs[:, :sdim].copy(), means[stable]
 
 
 def _unobservable_subspace(Pi3: np.ndarray, Pi4: np.ndarray, tol: float | None) -> np.ndarray:
