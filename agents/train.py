@@ -29,7 +29,8 @@ from .vec_env import ParallelVecEnv, SlotEncoder
 __all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "TqdmCallback", "set_threads"]
 
 _ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
-_EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise")
+_EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise",
+               "normalize_actions")
 
 
 def set_threads(threads: int | None = 1) -> None:
@@ -65,19 +66,21 @@ def _policy_kwargs(pk: dict | None) -> dict:
 
 
 def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int | None = None,
-                  env_kwargs: dict | None = None, agent_id: bool = False):
+                  env_kwargs: dict | None = None, agent_id: bool = False, normalize_actions: bool = False):
     """Monitored VecEnv for training (not normalised).
 
-    ``env`` is a name (see :mod:`agents.config`) or, for multi-agent, a ParallelEnv
-    constructor. Centralised envs use ``DummyVecEnv`` + ``Monitor``; multi-agent
-    ones :class:`ParallelVecEnv` + ``VecMonitor``.
+    ``env`` is a name (see :mod:`agents.config`) or a constructor. Centralised envs
+    use ``DummyVecEnv`` + ``Monitor``; multi-agent ones :class:`ParallelVecEnv` +
+    ``VecMonitor``. ``normalize_actions``: the agent acts in ``[-1, 1]`` (Gymnasium's
+    ``RescaleAction`` / the adapter's ``rescale_actions``).
     """
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     if multi_agent:
         fac = parallel_factory(env, env_kwargs)
-        venv = VecMonitor(ParallelVecEnv([fac for _ in range(n_envs)], agent_id=agent_id))
+        venv = VecMonitor(ParallelVecEnv([fac for _ in range(n_envs)], agent_id=agent_id,
+                                         rescale_actions=normalize_actions))
         if seed is not None:
             venv.seed(seed)
         return venv
@@ -85,6 +88,11 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
         fac = lambda: env(**(env_kwargs or {}))  # noqa: E731
     else:
         fac = gym_factory(env, env_kwargs)
+    if normalize_actions:
+        from gymnasium.wrappers import RescaleAction
+
+        inner = fac
+        fac = lambda: RescaleAction(inner(), np.float32(-1.0), np.float32(1.0))  # noqa: E731
     return make_vec_env(fac, n_envs=n_envs, seed=seed, vec_env_cls=DummyVecEnv)
 
 
@@ -155,7 +163,14 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     kw = dict(hp.get("env_kwargs") or {})
     kw.update(env_kwargs or {})
     agent_id = bool(hp.get("agent_id", False)) and multi_agent
-    venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id)
+    norm_act = bool(hp.get("normalize_actions", False))
+    venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id,
+                         normalize_actions=norm_act)
+    if norm_act and not multi_agent:
+        inner_space = venv.envs[0].unwrapped.action_space  # the env's own bounds, for evaluation
+        act_low, act_high = inner_space.low.tolist(), inner_space.high.tolist()
+    else:
+        act_low = act_high = None
     n_agents = venv.unwrapped.n_agents if multi_agent else 1
     norm = hp.get("normalize") or False
     if norm:
@@ -191,6 +206,7 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     config = {
         "env": name, "algo": algo, "multi_agent": multi_agent, "seed": seed, "timesteps": timesteps,
         "sb3_timesteps": int(model.num_timesteps), "n_agents": n_agents, "agent_id": agent_id,
+        "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
         "env_kwargs": kw, "normalize": bool(norm), "train_seconds": seconds,
         "hyperparams": {k: v for k, v in hp.items()},
     }
@@ -245,18 +261,26 @@ class TrainedAgent:
         return act
 
     def central_policy(self, deterministic: bool = True) -> Callable:
+        """``obs -> action`` in the env's own action space (undoes the [-1, 1] rescaling)."""
         lo, hi = self.action_space.low, self.action_space.high
+        rescale = self.config.get("normalize_actions") and self.config.get("action_low") is not None
+        if rescale:
+            elo = np.asarray(self.config["action_low"], dtype=np.float64)
+            ehi = np.asarray(self.config["action_high"], dtype=np.float64)
 
         def policy(obs):
-            a = self.predict(np.asarray(obs)[None], deterministic)[0]
-            return np.clip(a, lo, hi)
+            a = np.clip(self.predict(np.asarray(obs)[None], deterministic)[0], lo, hi)
+            if rescale:
+                a = elo + (a.astype(np.float64) + 1.0) * 0.5 * (ehi - elo)
+            return a
 
         return policy
 
     def encoder_for(self, env) -> SlotEncoder:
         agents = list(env.possible_agents)
         enc = SlotEncoder(agents, {a: env.observation_space(a) for a in agents},
-                          {a: env.action_space(a) for a in agents}, agent_id=self.config.get("agent_id", False))
+                          {a: env.action_space(a) for a in agents}, agent_id=self.config.get("agent_id", False),
+                          rescale_actions=bool(self.config.get("normalize_actions", False)))
         if enc.observation_space.shape != self.observation_space.shape:
             raise ValueError(f"model expects observations of shape {self.observation_space.shape}, "
                              f"the env gives {enc.observation_space.shape}")

@@ -31,7 +31,10 @@ Semantics
   a Box of the largest action size; agent ``a`` uses the first ``dim(a)``
   components (the rest are ignored) and its actions are clipped to its own bounds.
   The shared bounds are the element-wise union of the bounds of the agents that
-  have that component (see :class:`SlotEncoder`).
+  have that component (see :class:`SlotEncoder`). With ``rescale_actions=True``
+  the shared action space is ``[-1, 1]^d`` and each agent's first ``dim(a)``
+  components are mapped affinely onto its own box (recommended for PPO, whose
+  Gaussian policy starts near 0 with unit-scale noise).
 - ``get_attr`` / ``set_attr`` / ``env_method`` address slots; each call is made
   once per distinct copy among the requested slots and the result is repeated for
   every requested slot of that copy (so ``env_method("reset")`` never resets a
@@ -67,11 +70,15 @@ class SlotEncoder:
     agents : agent names in slot order.
     obs_spaces, act_spaces : dict agent -> Box.
     agent_id : append a one-hot agent index to every observation.
+    rescale_actions : shared actions live in ``[-1, 1]`` and are mapped onto each
+        agent's own bounds (which must then be finite).
     """
 
-    def __init__(self, agents: Sequence[str], obs_spaces: dict, act_spaces: dict, agent_id: bool = False):
+    def __init__(self, agents: Sequence[str], obs_spaces: dict, act_spaces: dict, agent_id: bool = False,
+                 rescale_actions: bool = False):
         self.agents = list(agents)
         self.agent_id = bool(agent_id)
+        self.rescale_actions = bool(rescale_actions)
         self.obs_spaces = {a: _flat_box(obs_spaces[a], "observation", a) for a in self.agents}
         self.act_spaces = {a: _flat_box(act_spaces[a], "action", a) for a in self.agents}
         self.obs_dims = [int(np.prod(self.obs_spaces[a].shape)) for a in self.agents]
@@ -101,6 +108,13 @@ class SlotEncoder:
             sp = self.act_spaces[a]
             alo[:d] = np.minimum(alo[:d], np.asarray(sp.low, dtype=np.float32).reshape(-1))
             ahi[:d] = np.maximum(ahi[:d], np.asarray(sp.high, dtype=np.float32).reshape(-1))
+        if self.rescale_actions:
+            for a in self.agents:
+                sp = self.act_spaces[a]
+                if not (np.all(np.isfinite(sp.low)) and np.all(np.isfinite(sp.high))):
+                    raise ValueError(f"rescale_actions needs finite action bounds; agent {a!r} has {sp}")
+            alo[:] = -1.0
+            ahi[:] = 1.0
         self.action_space = spaces.Box(alo, ahi, dtype=np.float32)
         self._eye = np.eye(M, dtype=np.float32)
 
@@ -126,7 +140,10 @@ class SlotEncoder:
         a = self.agents[j]
         sp = self.act_spaces[a]
         act = np.asarray(action, dtype=np.float64).reshape(-1)[: self.act_dims[j]]
-        act = np.clip(act, sp.low.reshape(-1), sp.high.reshape(-1))
+        lo, hi = sp.low.reshape(-1).astype(np.float64), sp.high.reshape(-1).astype(np.float64)
+        if self.rescale_actions:
+            act = lo + (np.clip(act, -1.0, 1.0) + 1.0) * 0.5 * (hi - lo)
+        act = np.clip(act, lo, hi)
         return act.reshape(sp.shape).astype(sp.dtype, copy=False)
 
     def decode_all(self, actions) -> dict:
@@ -141,9 +158,10 @@ class ParallelVecEnv(VecEnv):
     ----------
     env_fns : one factory per copy, each returning a *new* ParallelEnv.
     agent_id : append a one-hot agent id to observations.
+    rescale_actions : shared actions in ``[-1, 1]``, mapped onto each agent's bounds.
     """
 
-    def __init__(self, env_fns: Sequence[Callable[[], Any]], agent_id: bool = False):
+    def __init__(self, env_fns: Sequence[Callable[[], Any]], agent_id: bool = False, rescale_actions: bool = False):
         if len(env_fns) < 1:
             raise ValueError("ParallelVecEnv needs at least one environment factory")
         self.envs = [fn() for fn in env_fns]
@@ -155,7 +173,8 @@ class ParallelVecEnv(VecEnv):
             if list(e.possible_agents) != agents:
                 raise ValueError("all environment copies must have the same possible_agents")
         self.encoder = SlotEncoder(agents, {a: first.observation_space(a) for a in agents},
-                                   {a: first.action_space(a) for a in agents}, agent_id=agent_id)
+                                   {a: first.action_space(a) for a in agents}, agent_id=agent_id,
+                                   rescale_actions=rescale_actions)
         self.agents = agents
         self.n_agents = len(agents)
         self.n_copies = len(self.envs)

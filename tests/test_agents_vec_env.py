@@ -211,3 +211,18 @@ def test_works_with_sb3_checker_and_vecnormalize():
     assert "episode" in infos[0]  # VecMonitor saw whole episodes
     assert infos[0]["episode"]["l"] == 3
     venv.close()
+
+
+def test_rescaled_actions_map_onto_each_agents_bounds():
+    venv = ParallelVecEnv([lambda: TinyParallel() for _ in range(1)], rescale_actions=True)
+    np.testing.assert_array_equal(venv.action_space.low, [-1, -1])
+    np.testing.assert_array_equal(venv.action_space.high, [1, 1])
+    venv.reset()
+    venv.step(np.array([[1.0, 0.3], [-1.0, 0.5]], np.float32))
+    got = venv.envs[0].received[-1]
+    np.testing.assert_allclose(got["a0"], [1.0])  # a0 bounds [-1, 1]
+    np.testing.assert_allclose(got["a1"], [-2.0, 1.0])  # a1 bounds [-2, 2]: -1 -> -2, 0.5 -> 1
+    venv.step(np.array([[5.0, 0.0], [0.0, -7.0]], np.float32))  # out of [-1, 1]: clipped first
+    got = venv.envs[0].received[-1]
+    np.testing.assert_allclose(got["a0"], [1.0])
+    np.testing.assert_allclose(got["a1"], [0.0, -2.0])
