@@ -25,16 +25,19 @@ __all__ = ["HAVE_NUMBA", "control_period_compiled"]
 
 @_njit
 def _control_period(x, z, gamma, gamma_s, v, x_r, u, r,
-                    A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, P_u, lap, A_r,
+                    A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
                     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference):
     nb, N, n = z.shape
     p = C.shape[1]
     m = B.shape[1]
     mv = B_v.shape[1]
     y = np.empty((N, p))
+    rq = Q_proj.shape[2]
+    maxdeg = nbr_idx.shape[1]
     xhat = np.empty((N, n))
     d = np.empty((N, n))
     w = np.empty(n)
+    cq = np.empty(rq)
     bu = np.empty((N, n))
     Bu = np.empty(n)
     Br = np.empty(n)
@@ -71,19 +74,32 @@ def _control_period(x, z, gamma, gamma_s, v, x_r, u, r,
                     for q in range(p):
                         s += G_bar[i, k, q] * y[i, q]
                     xhat[i, k] = s
-            # d = L xhat
+            # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
             for i in range(N):
                 for k in range(n):
-                    s = 0.0
-                    for j in range(N):
-                        s += lap[i, j] * xhat[j, k]
-                    d[i, k] = s
+                    d[i, k] = deg[i] * xhat[i, k]
+                for q in range(maxdeg):
+                    a = nbr_w[i, q]
+                    if a != 0.0:
+                        j = nbr_idx[i, q]
+                        for k in range(n):
+                            d[i, k] -= a * xhat[j, k]
             for i in range(N):
+                # w = P_u,i d_i through the thinner of the two bases:
+                # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
+                for c in range(rq):
+                    s = 0.0
+                    for l in range(n):
+                        s += Q_proj[i, l, c] * d[i, l]
+                    cq[c] = s
+                rng_ = proj_range[i]
                 nw2 = 0.0
                 for k in range(n):
                     s = 0.0
-                    for l in range(n):
-                        s += P_u[i, k, l] * d[i, l]
+                    for c in range(rq):
+                        s += Q_proj[i, k, c] * cq[c]
+                    if not rng_:
+                        s = d[i, k] - s
                     w[k] = s
                     nw2 += s * s
                 nw = np.sqrt(nw2)
@@ -138,6 +154,7 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
     x_r = np.array(x_r, dtype=np.float64, order="C")
     _control_period(x, z, gamma, gamma_s, v, x_r,
                     np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
-                    p.A, p.B, p.B_v, p.C, p.E_bar, p.F_bar, p.G_bar, p.B_bar, p.P_u, p.laplacian, p.A_r,
+                    p.A, p.B, p.B_v, p.C, p.E_bar, p.F_bar, p.G_bar, p.B_bar,
+                    p.Q_proj, p.proj_range, p.nbr_idx, p.nbr_w, p.degree, p.A_r,
                     p.phi, p.phi_s, p.sigma, p.sigma_s, p.Phi_v, p.dt, p.substeps, p.has_reference)
     return x, z, gamma, gamma_s, v, x_r

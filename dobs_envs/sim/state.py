@@ -30,6 +30,52 @@ def _ro(a, shape=None) -> np.ndarray:
     return out
 
 
+def _ro_int(a):
+    out = np.ascontiguousarray(np.array(a, dtype=np.int64, copy=True))
+    out.flags.writeable = False
+    return out
+
+
+def _ro_bool(a):
+    out = np.ascontiguousarray(np.array(a, dtype=np.bool_, copy=True))
+    out.flags.writeable = False
+    return out
+
+
+def _thin_projector_bases(P_u: np.ndarray):
+    """For each orthogonal projector ``P_u,i = T_iu T_iu^T`` return the thinner
+    orthonormal basis: of its range (rank <= n/2) or of its complement Im T_id.
+    Padded with zero columns to a common width r = max_i min(rank, n - rank)."""
+    N, n, _ = P_u.shape
+    bases, is_range = [], []
+    for i in range(N):
+        w, V = np.linalg.eigh(0.5 * (P_u[i] + P_u[i].T))  # eigenvalues 0 / 1
+        rng_ = V[:, w > 0.5]
+        cmp_ = V[:, w <= 0.5]
+        if rng_.shape[1] <= cmp_.shape[1]:
+            bases.append(rng_); is_range.append(True)
+        else:
+            bases.append(cmp_); is_range.append(False)
+    r = max(1, max(b.shape[1] for b in bases))
+    Q = np.zeros((N, n, r))
+    for i, b in enumerate(bases):
+        Q[i, :, : b.shape[1]] = b
+    return Q, np.array(is_range)
+
+
+def _neighbour_lists(adj: np.ndarray):
+    """Padded neighbour index / weight lists of a weighted adjacency matrix."""
+    N = adj.shape[0]
+    nbrs = [np.flatnonzero(adj[i]) for i in range(N)]
+    maxdeg = max(1, max(len(x) for x in nbrs))
+    idx = np.zeros((N, maxdeg), dtype=np.int64)
+    wts = np.zeros((N, maxdeg))
+    for i, nb in enumerate(nbrs):
+        idx[i, : len(nb)] = nb
+        wts[i, : len(nb)] = adj[i, nb]
+    return idx, wts
+
+
 @dataclass(frozen=True)
 class SimState:
     """Batched simulation state. All arrays have the batch dimension first.
@@ -90,6 +136,12 @@ class SimParams:
     sigma_s: np.ndarray  # (N,)
     S_v: np.ndarray  # (m_v, m_v) exosystem matrix (zeros: v held constant)
     Phi_v: np.ndarray  # (m_v, m_v) exact exosystem transition expm(S_v dt) over one Euler step
+    # compact forms used by the compiled kernel (same operators as P_u and laplacian):
+    Q_proj: np.ndarray = None  # (N, n, r) orthonormal basis of Im T_iu (proj_range) or of Im T_id
+    proj_range: np.ndarray = None  # (N,) bool: P_u,i = Q Q^T (True) or I - Q Q^T (False)
+    nbr_idx: np.ndarray = None  # (N, max degree) neighbour indices (padding: weight 0)
+    nbr_w: np.ndarray = None  # (N, max degree) edge weights a_ij
+    degree: np.ndarray = None  # (N,) sum_j a_ij
     dt: float = 1e-3
     substeps: int = 1
     has_reference: bool = False
@@ -176,10 +228,14 @@ class SimParams:
             A_r = np.zeros((n, n))
         adj = np.asarray(design.adjacency, dtype=float)
         lap = np.diag(adj.sum(axis=1)) - adj
+        Q_proj, proj_range = _thin_projector_bases(np.asarray(design.P_u, dtype=float))
+        nbr_idx, nbr_w = _neighbour_lists(adj)
         return cls(
             A=_ro(design.A), B=_ro(design.B), B_v=_ro(B_v), C=_ro(design.C),
             E_bar=_ro(design.E_bar), F_bar=_ro(design.F_bar), G_bar=_ro(design.G_bar),
             B_bar=_ro(design.B_bar), P_u=_ro(design.P_u), laplacian=_ro(lap), A_r=_ro(A_r),
+            Q_proj=_ro(Q_proj), proj_range=_ro_bool(proj_range), nbr_idx=_ro_int(nbr_idx), nbr_w=_ro(nbr_w),
+            degree=_ro(adj.sum(axis=1)),
             phi=per_node("phi", phi), phi_s=per_node("phi_s", phi_s),
             sigma=per_node("sigma", sigma), sigma_s=per_node("sigma_s", sigma_s),
             S_v=_ro(S), Phi_v=_ro(expm(S * dt)), dt=float(dt), substeps=int(substeps),
