@@ -17,7 +17,7 @@
 
 Budgets (environment steps per agent; wall times measured on a 2-core CPU):
 
-- ``tiny``: a few hundred steps and 2-second episodes (tests);
+- ``tiny``: a few hundred steps and 20-step (1 s) episodes (tests);
 - ``quick``: the README's main job, ~10 minutes;
 - ``full``: longer training (hours).
 """
@@ -47,7 +47,7 @@ AGENTS = {
 BUDGETS = {
     "tiny": {
         "episodes": 2,
-        "env_kwargs": {"horizon": 1.0},
+        "env_kwargs": {"max_cycles": 20},
         "agents": {"ppo": 256, "sac": 96, "ppo_ma": 128},
         "hyperparams": {
             "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1},

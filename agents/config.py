@@ -72,6 +72,15 @@ def gym_factory(env: str, env_kwargs: dict | None = None) -> Callable[[], Any]:
 
     gid = gym_id(env)
     kw = dict(env_kwargs or {})
+    if gid.startswith("dobs_envs/"):
+        # the registered ids take the episode length as a TimeLimit (max_episode_steps);
+        # translate the parallel envs' max_cycles / horizon so both views have the same episodes
+        mc, hz = kw.pop("max_cycles", None), kw.pop("horizon", None)
+        if hz is not None:
+            period = float(kw.get("dt", 1e-3)) * int(kw.get("substeps", 50))
+            mc = max(1, int(round(float(hz) / period)))
+        if mc is not None:
+            kw["max_episode_steps"] = int(mc)
     return lambda: gym.make(gid, **kw)
 
 

@@ -9,7 +9,9 @@ PettingZoo env, so centralised and per-agent policies can be compared directly
 Per-episode metrics (read from the underlying simulation, identical for all policies):
 
 - ``return``: sum of the team reward ``-(e'Qe + u'Ru) * period``;
-- ``final_tracking_error``: ``||x - x_r||`` (``||x||`` without reference) at the last step;
+- ``final_tracking_error``: the task error at the last step: ``||x - x_r||`` (tracking),
+  ``||x||`` (stabilisation), the position disagreement ``||p - pbar 1||`` (hetero_mas
+  rendezvous) -- the environment's ``_task_error()`` (what its ``render()`` plots);
 - ``rms_estimation_error``: RMS over time and observer nodes of ``||xhat_i - x||`` of the
   environment's distributed observer (it runs whatever the policy does);
 - ``control_effort``: ``int ||u||^2 dt`` of the applied (clipped) input;
@@ -58,6 +60,11 @@ class EpisodeResult:
                 "x0": [float(v) for v in self.x0]}
 
 
+def _task_error(base) -> float:
+    fn = getattr(base, "_task_error", None)
+    return float(fn()) if callable(fn) else float(base.tracking_error)
+
+
 def _clipped(u, space):
     return np.clip(np.asarray(u, dtype=np.float64).reshape(space.shape), space.low, space.high)
 
@@ -72,7 +79,7 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
     period = float(base.control_period)
     xs = base.state_layout()["x"]
     x0 = np.asarray(base.state(), dtype=np.float64)[xs].copy()
-    ts, te, ee = [0.0], [float(base.tracking_error)], [float(np.mean(base.estimation_errors() ** 2))]
+    ts, te, ee = [0.0], [_task_error(base)], [float(np.mean(base.estimation_errors() ** 2))]
     ret, effort, failed, n = 0.0, 0.0, False, 0
     pol_err2, pol_cnt = 0.0, 0
     agent0 = base.possible_agents[0]
@@ -99,7 +106,7 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
         ret += r
         effort += u2 * period
         ts.append(n * period)
-        te.append(float(base.tracking_error))
+        te.append(_task_error(base))
         ee.append(float(np.mean(base.estimation_errors() ** 2)))
         if done:
             failed = bool(done_term)
