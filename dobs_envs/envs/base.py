@@ -26,7 +26,7 @@ from pettingzoo import ParallelEnv
 from scipy.linalg import expm
 
 from ..sim import SimParams, SimState, step_env
-from .observation import FeatureLayout, resolve_components
+from .observation import FeatureLayout, clip_inplace, resolve_components, write_features
 
 __all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS"]
 
@@ -159,6 +159,9 @@ class DObsParallelEnv(ParallelEnv):
         self.channel_slices = sc.channel_slices
         self.links = tuple(sc.links)
         self._widths = tuple(s.stop - s.start for s in self.channel_slices)
+        self._shapes = [(w,) for w in self._widths]
+        self._agent_keys = set(self.possible_agents)
+        self._agent_links = tuple(zip(self.possible_agents, self.links))
 
         # --- actions -----------------------------------------------------------------
         bound = opts["action_bound"]
@@ -209,8 +212,8 @@ class DObsParallelEnv(ParallelEnv):
         self.state_space = spaces.Box(-np.inf, np.inf, shape=(pos,), dtype=self.obs_dtype)
 
         # --- reward ------------------------------------------------------------------
-        self.Q = self._matrix(opts["Q"], sc.Q, n, "Q")
-        self.R = self._matrix(opts["R"], sc.R, m, "R")
+        self.Q = np.ascontiguousarray(self._matrix(opts["Q"], sc.Q, n, "Q"))
+        self.R = np.ascontiguousarray(self._matrix(opts["R"], sc.R, m, "R"))
         sb = opts["state_bound"]
         if not (np.isfinite(sb) and sb > 0):
             raise ValueError(f"state_bound must be a positive finite number, got {sb!r}")
@@ -221,21 +224,19 @@ class DObsParallelEnv(ParallelEnv):
         self._f[L.one] = 1.0
         self._u = np.zeros((1, m))
         self._u0 = self._u[0]
-        self._r = np.zeros((1, m))
-        self._C2 = np.ascontiguousarray(p.C.reshape(N * p.C.shape[1], n))  # padded (N p, n)
-        pp = p.C.shape[1]
-        G = np.zeros((N * n, N * pp))
-        for i in range(N):
-            G[i * n:(i + 1) * n, i * pp:(i + 1) * pp] = p.G_bar[i]
-        self._Gblk = G
-        yrows = np.concatenate([i * pp + np.arange(pi) for i, pi in enumerate(p_i)]).astype(np.intp)
-        self._yrows = yrows
-        self._link_arr = np.asarray(self.links, dtype=np.intp)
+        self._r = self._f[L.r.start:L.r.stop].reshape(1, m)  # view (see _advance)
+        self._ref = np.zeros((3, m))
         if self.has_reference:
             ref = sc.reference
-            self._ref_a = np.asarray(ref.amplitude, dtype=float)
-            self._ref_w = np.asarray(ref.frequency, dtype=float)
-            self._ref_ph = np.asarray(ref.phase, dtype=float)
+            self._ref[0], self._ref[1], self._ref[2] = ref.amplitude, ref.frequency, ref.phase
+        self._off = np.array([L.y.start, L.xhat.start, L.x.start, L.x_r.start, L.gamma.start, L.gamma_s.start,
+                              L.v.start, L.r.start, L.time.start, L.e.start] + p_i, dtype=np.int64)
+        self._all_index = np.ascontiguousarray(L.all_index, dtype=np.int64)
+        self._obs_len = int(self._all_index.size)
+        sl, pos = [], 0
+        for a, ix in zip(self.possible_agents, L.agent_index):
+            sl.append((a, slice(pos, pos + ix.size))); pos += ix.size
+        self._agent_obs_slices = tuple(sl)
         self._est_err = np.zeros(N)
         self._np_random = None
         self._np_random_seed = None
@@ -437,51 +438,55 @@ class DObsParallelEnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode (no live agents); call reset() first")
         u = self._u0
-        agent_id = self._agent_id
-        slices, widths = self.channel_slices, self._widths
+        # fast path: exactly the live agents, right shapes, numeric -> one concatenate into u
+        try:
+            vals = [actions[a] for a in self.possible_agents]
+            ok = actions.keys() == self._agent_keys and [np.shape(v) for v in vals] == self._shapes
+            if ok:
+                np.concatenate(vals, out=u, casting="same_kind")
+        except (KeyError, TypeError, ValueError, AttributeError):
+            ok = False
+        if not ok:
+            self._parse_actions_slow(actions)
+        if not clip_inplace(u, self._u_low, self._u_high):
+            bad = [a for a, sl in zip(self.possible_agents, self.channel_slices) if not np.isfinite(u[sl]).all()]
+            raise ValueError(f"action of agent(s) {bad} contains NaN or inf")
+        self._advance()
+        return self._step_outputs()
+
+    def _parse_actions_slow(self, actions):
+        """Validate ``actions`` agent by agent (errors name the agent) and write them into ``u``."""
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        n_given = 0
+        u, agent_id, widths = self._u0, self._agent_id, self._widths
         for agent, a in actions.items():
             k = agent_id.get(agent)
             if k is None:
                 raise ValueError(f"unknown agent {agent!r} in actions; agents are {self.possible_agents}")
             try:
-                a = np.asarray(a, dtype=np.float64)
+                arr = np.asarray(a, dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValueError(f"action of agent {agent!r} is not a numeric array: {a!r}") from None
-            if a.shape != (widths[k],):
-                raise ValueError(f"action of agent {agent!r} must have shape ({widths[k]},), got {a.shape}")
-            u[slices[k]] = a
-            n_given += 1
-        if n_given != len(self.possible_agents):
-            missing = [a for a in self.possible_agents if a not in actions]
+            if arr.shape != (widths[k],):
+                raise ValueError(f"action of agent {agent!r} must have shape ({widths[k]},), got {arr.shape}")
+            u[self.channel_slices[k]] = arr
+        missing = [a for a in self.possible_agents if a not in actions]
+        if missing:
             raise ValueError(f"missing action(s) for agent(s) {missing}")
-        if not np.isfinite(u).all():
-            bad = [a for a, sl in zip(self.possible_agents, slices) if not np.isfinite(u[sl]).all()]
-            raise ValueError(f"action of agent(s) {bad} contains NaN or inf")
-        self._advance()
-        return self._step_outputs()
 
     def _advance(self):
-        """Clip ``self._u0``, simulate one control period, update features/reward/termination."""
-        u = self._u0
-        np.maximum(u, self._u_low, out=u)
-        np.minimum(u, self._u_high, out=u)
+        """Simulate one control period with the (validated, clipped) ``self._u0``; update
+        features/reward/termination. ``self._r`` is a view of the feature vector's ``r``
+        block, written at the current time ``t``: the command r^k(t) of eq. (refxdy) held over
+        the period (zeros without a reference)."""
         sim = self._sim
-        r = self._r
-        if self.has_reference:  # r^k(t) held over the period, eq. (refxdy); f[r] was written at time t
-            r[0] = self._f[self.layout.r]
         if self._v_signal is not None:
             sim = SimState(sim.t, sim.x, sim.z, sim.gamma, sim.gamma_s, self._v_of_t(sim.t[0])[None], sim.x_r)
-        self._sim = step_env(sim, self._u, self.params, r, validate=False)
+        self._sim = step_env(sim, self._u, self.params, self._r, validate=False)
         self._cycles += 1
         self._features()
-        e = self._e
-        cost = float(e @ self.Q @ e + u @ self.R @ u) * self.control_period
-        self._reward = -cost
-        x = self._sim.x[0]
-        nx = math.sqrt(float(x @ x))
+        self._reward = -self._cost * self.control_period
+        nx = self._x_norm
         if not math.isfinite(nx):
             self._terminated, self._reason = True, "non_finite_state"
         elif nx > self.state_bound:
@@ -495,48 +500,34 @@ class DObsParallelEnv(ParallelEnv):
             h[0].append(float(self._sim.t[0])); h[1].append(self._task_error()); h[2].append(self._est_err.copy())
 
     def _features(self):
-        """Write the feature vector ``f`` (see :mod:`.observation`) from the current state."""
-        L, f, s = self.layout, self._f, self._sim
-        x = s.x[0]
-        Y = self._C2 @ x
-        f[L.y] = Y[self._yrows]
-        xh = f[L.xhat]
-        np.add(s.z[0].reshape(-1), self._Gblk @ Y, out=xh)
-        f[L.x] = x
-        f[L.x_r] = s.x_r[0]
-        f[L.gamma] = s.gamma[0]
-        f[L.gamma_s] = s.gamma_s[0]
-        if self.has_reference:
-            t = s.t[0]
-            f[L.r] = self._ref_a * np.sin(self._ref_w * t + self._ref_ph)
-        if self.n_unknown:
-            f[L.v] = s.v[0]
-        f[L.time] = s.t[0]
-        d = xh.reshape(self.n_nodes, self.n_states) - x
-        np.sqrt(np.einsum("ij,ij->i", d, d), out=self._est_err)
-        self._e = x - s.x_r[0] if self.has_reference else x
-        self._track_err = math.sqrt(float(self._e @ self._e))
-        self._fo = f if self.obs_dtype == np.float64 else f.astype(self.obs_dtype)
+        """Write the feature vector ``f`` (see :mod:`.observation`), the estimation errors,
+        the step cost, the norms and all agents' observations (``self._obs_all``, a fresh array)
+        from the current state in one compiled call."""
+        s = self._sim
+        out = np.empty(self._obs_len, self.obs_dtype)
+        cost, self._track_err, self._x_norm = write_features(
+            s.x, s.z, s.x_r, s.gamma, s.gamma_s, s.v, float(s.t[0]), self.params.C, self.params.G_bar,
+            self._ref, self.has_reference, self._f, self._off, self._est_err, self.Q, self.R, self._u0,
+            self._all_index, out)
+        self._cost = cost
+        self._obs_all = out
 
     def _observations(self):
-        fo = self._fo
-        idx = self.layout.agent_index
-        return {a: fo[idx[k]] for k, a in enumerate(self.possible_agents)}
+        """Per-agent observations: views into this step's fresh concatenated array."""
+        o = self._obs_all
+        return {a: o[sl] for a, sl in self._agent_obs_slices}
 
     def _infos(self, reason):
-        ee, te = self._est_err, self._track_err
-        g, gs = self._sim.gamma[0], self._sim.gamma_s[0]
+        ee, te = self._est_err.tolist(), self._track_err
+        g, gs = self._sim.gamma[0].tolist(), self._sim.gamma_s[0].tolist()
         extra = self._shared_info()
-        out = {}
-        for k, a in enumerate(self.possible_agents):
-            i = self.links[k]
-            d = {"estimation_error": float(ee[i]), "tracking_error": te, "gamma": float(g[i]), "gamma_s": float(gs[i])}
-            if extra:
-                d.update(extra)
-            if reason is not None:
-                d["termination_reason"] = reason
-            out[a] = d
-        return out
+        if reason is not None:
+            extra = {**extra, "termination_reason": reason}
+        if extra:
+            return {a: {"estimation_error": ee[i], "tracking_error": te, "gamma": g[i], "gamma_s": gs[i], **extra}
+                    for a, i in self._agent_links}
+        return {a: {"estimation_error": ee[i], "tracking_error": te, "gamma": g[i], "gamma_s": gs[i]}
+                for a, i in self._agent_links}
 
     def _shared_info(self) -> dict:
         """Task-specific info entries shared by all agents (subclasses)."""
@@ -561,7 +552,7 @@ class DObsParallelEnv(ParallelEnv):
         """Global state for centralised critics: ``(x, x_r, xhat_0..xhat_{N-1}, v)`` flattened (see :meth:`state_layout`)."""
         if self._sim is None:
             raise RuntimeError("call reset() before state()")
-        return self._fo[self._state_index]
+        return self._f[self._state_index].astype(self.obs_dtype)
 
     def estimation_errors(self) -> np.ndarray:
         """``||xhat_i - x||`` for every observer node (copy)."""

@@ -43,6 +43,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .base import DObsParallelEnv
+from .observation import clip_inplace
 
 __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS"]
 
@@ -90,7 +91,7 @@ class CentralizedEnv(gym.Env):
         if seed is not None:
             self.action_space.seed(int(seed))
         pe.reset(options=options)
-        return pe._fo[self._index], self._info()
+        return pe._obs_all, self._info()
 
     def step(self, action):
         pe = self.parallel_env
@@ -102,17 +103,18 @@ class CentralizedEnv(gym.Env):
             raise ValueError(f"action must be a numeric array of shape ({self._m},), got {action!r}") from None
         if a.shape != (self._m,):
             raise ValueError(f"action must have shape ({self._m},) (all agents' inputs stacked), got {a.shape}")
-        if not np.isfinite(a).all():
+        u = pe._u0
+        u[:] = a
+        if not clip_inplace(u, pe._u_low, pe._u_high):
             bad = [ag for ag, s in zip(self.agents, self.agent_action_slices) if not np.isfinite(a[s]).all()]
             raise ValueError(f"action contains NaN or inf in the channel(s) of agent(s) {bad}")
-        pe._u0[:] = a
         pe._advance()
         term = pe._terminated
         trunc = (not term) and pe.max_cycles is not None and pe._cycles >= pe.max_cycles
         info = self._info()
         if term:
             info["termination_reason"] = pe._reason
-        return pe._fo[self._index], pe._reward, term, trunc, info
+        return pe._obs_all, pe._reward, term, trunc, info
 
     def _info(self) -> dict:
         pe = self.parallel_env

@@ -4,9 +4,9 @@ Every control step the environment writes, once, a flat *feature vector* ``f``
 holding everything any agent may observe::
 
     f = [ y (sum_i p_i) | xhat_0..xhat_{N-1} (N n) | x (n) | x_r (n) | gamma (N) | gamma_s (N)
-          | r (m) | v (m_v) | t (1) | 0 (1) | 1 (1) ]
+          | v (m_v) | r (m) | t (1) | e (n) | 0 (1) | 1 (1) ]
 
-and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
+(written by one compiled call, :func:`write_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
 gather, which also copies). Padding entries point at the constant 0, mask
 entries at the constant 1 (or 0 for padding). This keeps the per-step cost at
 one gather per agent whatever components are selected.
@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components"]
+__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace"]
 
 COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
 LOCAL = ("y", "xhat", "neighbors", "mask", "r")
@@ -105,9 +105,10 @@ class FeatureLayout:
         self.x_r = take(n)
         self.gamma = take(N)
         self.gamma_s = take(N)
-        self.r = take(m)
         self.v = take(m_v)
+        self.r = take(m)
         self.time = take(1)
+        self.e = take(n)  # task error x - x_r (or x); not observable, used for the reward
         self.zero = take(1).start
         self.one = take(1).start
         self.size = pos
@@ -158,3 +159,101 @@ class FeatureLayout:
         if "time" in lay:
             low[lay["time"]] = 0.0
         return low, high
+
+
+try:
+    import numba as _numba
+
+    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)
+except ImportError:  # pragma: no cover
+    def _njit(f):
+        return f
+
+
+@_njit
+def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, est, Q, R, u, idx, out):
+    """Fill the feature vector ``f`` from the (batch-1) simulation arrays in one call.
+
+    ``off`` = (y, xhat, x, x_r, gamma, gamma_s, v, r, time, e) start offsets;
+    ``C (N, p, n)``/``G (N, n, p)`` padded design arrays (``y`` keeps the first
+    ``p_i`` rows of node ``i``: ``off[10:10+N]`` holds ``p_i``); ``ref (3, m)`` =
+    amplitude, frequency, phase of ``r(t)``. Writes ``est[i] = ||xhat_i - x||``.
+    Then gathers ``out[j] = f[idx[j]]`` (all agents' observations, concatenated; ``out`` is
+    a fresh array of the observation dtype).
+    Returns ``(e'Qe + u'Ru, ||e||, ||x||)`` with ``e = x - x_r`` (``has_ref``) or ``x``.
+    Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``, ``xhat_i = z_i + G_i y_i``.
+    """
+    N, n = z.shape[1], z.shape[2]
+    p = C.shape[1]
+    y = np.empty(p)
+    oy = off[0]
+    oxh = off[1]
+    for i in range(N):
+        for q in range(p):
+            s = 0.0
+            for l in range(n):
+                s += C[i, q, l] * x[0, l]
+            y[q] = s
+        pi = off[10 + i]
+        for q in range(pi):
+            f[oy + q] = y[q]
+        oy += pi
+        ss = 0.0
+        for k in range(n):
+            s = 0.0
+            for q in range(p):
+                s += G[i, k, q] * y[q]
+            xh = z[0, i, k] + s
+            f[oxh + i * n + k] = xh
+            d = xh - x[0, k]
+            ss += d * d
+        est[i] = np.sqrt(ss)
+    xx = 0.0
+    ee = 0.0
+    for k in range(n):
+        f[off[2] + k] = x[0, k]
+        f[off[3] + k] = x_r[0, k]
+        xx += x[0, k] * x[0, k]
+        e = x[0, k] - x_r[0, k] if has_ref else x[0, k]
+        f[off[9] + k] = e
+        ee += e * e
+    for i in range(N):
+        f[off[4] + i] = gamma[0, i]
+        f[off[5] + i] = gamma_s[0, i]
+    for j in range(v.shape[1]):
+        f[off[6] + j] = v[0, j]
+    m = ref.shape[1]
+    if has_ref:
+        for j in range(m):
+            f[off[7] + j] = ref[0, j] * np.sin(ref[1, j] * t + ref[2, j])
+    f[off[8]] = t
+    oe = off[9]
+    cost = 0.0
+    for k in range(n):
+        s = 0.0
+        for l in range(n):
+            s += Q[k, l] * f[oe + l]
+        cost += f[oe + k] * s
+    mu = u.shape[0]
+    for k in range(mu):
+        s = 0.0
+        for l in range(mu):
+            s += R[k, l] * u[l]
+        cost += u[k] * s
+    for j in range(idx.shape[0]):
+        out[j] = f[idx[j]]
+    return cost, np.sqrt(ee), np.sqrt(xx)
+
+
+@_njit
+def clip_inplace(u, lo, hi):
+    """Clip ``u`` to ``[lo, hi]`` in place; False (and ``u`` untouched) if ``u`` has NaN/inf."""
+    for j in range(u.shape[0]):
+        if not np.isfinite(u[j]):
+            return False
+    for j in range(u.shape[0]):
+        if u[j] < lo[j]:
+            u[j] = lo[j]
+        elif u[j] > hi[j]:
+            u[j] = hi[j]
+    return True
