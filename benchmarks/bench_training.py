@@ -32,6 +32,26 @@ def ppo_steps_per_second(env_id: str, timesteps: int, threads: int, seed: int = 
     return model.num_timesteps / dt
 
 
+def env_step_us(env_id: str, steps: int = 4000) -> float:
+    """Raw ``gym.make(env_id).step`` cost (zero action, autoreset), microseconds."""
+    import gymnasium as gym
+    import numpy as np
+
+    import dobs_envs  # noqa: F401
+
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    a = np.zeros(env.action_space.shape, dtype=np.float32)
+    for k in range(steps + 200):
+        if k == 200:
+            t0 = time.perf_counter()
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    env.close()
+    return (time.perf_counter() - t0) / steps * 1e6
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--timesteps", type=int, default=16384)
@@ -46,6 +66,10 @@ def main(argv=None) -> int:
             best[env_id] = max(best[env_id], sps)
             print(f"repeat {r}: {env_id:26s} {sps:8.0f} steps/s")
     ratio = best[args.env] / best["Pendulum-v1"]
+    us = {e: env_step_us(e) for e in (args.env, "Pendulum-v1")}
+    for e in us:
+        share = us[e] / (1e6 / best[e])
+        print(f"{e:26s} env.step {us[e]:6.1f} us = {share:.0%} of a PPO training step")
     print(f"PPO (n_envs=4, n_steps=256, batch=64, n_epochs=10, net=[64, 64], threads={args.threads}, "
           f"{args.timesteps} steps, best of {args.repeats})")
     print(f"{args.env}: {best[args.env]:.0f} steps/s   Pendulum-v1: {best['Pendulum-v1']:.0f} steps/s   "
