@@ -26,7 +26,7 @@ from pettingzoo import ParallelEnv
 from scipy.linalg import expm
 
 from ..sim import SimParams, SimState, step_env
-from .observation import FeatureLayout, clip_inplace, resolve_components, write_features
+from .observation import FeatureLayout, clip_inplace, pack_static, resolve_components, write_features_packed
 
 __all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS"]
 
@@ -220,9 +220,12 @@ class DObsParallelEnv(ParallelEnv):
         self.state_bound = float(sb)
 
         # --- preallocated step buffers ------------------------------------------------
-        self._f = np.zeros(L.size)
+        # work buffer W = [f (feature vector) | estimation errors (N) | u (m)], see write_features_packed
+        self._W = np.zeros(L.size + N + m)
+        self._f = self._W[:L.size]
         self._f[L.one] = 1.0
-        self._u = np.zeros((1, m))
+        self._est_err = self._W[L.size:L.size + N]
+        self._u = self._W[L.size + N:].reshape(1, m)
         self._u0 = self._u[0]
         self._r = self._f[L.r.start:L.r.stop].reshape(1, m)  # view (see _advance)
         self._ref = np.zeros((3, m))
@@ -233,11 +236,11 @@ class DObsParallelEnv(ParallelEnv):
                               L.v.start, L.r.start, L.time.start, L.e.start] + p_i, dtype=np.int64)
         self._all_index = np.ascontiguousarray(L.all_index, dtype=np.int64)
         self._obs_len = int(self._all_index.size)
+        self._SF, self._SI = pack_static(p.C, p.G_bar, self._ref, self.Q, self.R, self._off, self._all_index, L.size)
         sl, pos = [], 0
         for a, ix in zip(self.possible_agents, L.agent_index):
             sl.append((a, slice(pos, pos + ix.size))); pos += ix.size
         self._agent_obs_slices = tuple(sl)
-        self._est_err = np.zeros(N)
         self._np_random = None
         self._np_random_seed = None
         self._sim = None
@@ -441,7 +444,7 @@ class DObsParallelEnv(ParallelEnv):
         # fast path: exactly the live agents, right shapes, numeric -> one concatenate into u
         try:
             vals = [actions[a] for a in self.possible_agents]
-            ok = actions.keys() == self._agent_keys and [np.shape(v) for v in vals] == self._shapes
+            ok = actions.keys() == self._agent_keys and [v.shape for v in vals] == self._shapes
             if ok:
                 np.concatenate(vals, out=u, casting="same_kind")
         except (KeyError, TypeError, ValueError, AttributeError):
@@ -505,10 +508,9 @@ class DObsParallelEnv(ParallelEnv):
         from the current state in one compiled call."""
         s = self._sim
         out = np.empty(self._obs_len, self.obs_dtype)
-        cost, self._track_err, self._x_norm = write_features(
-            s.x, s.z, s.x_r, s.gamma, s.gamma_s, s.v, float(s.t[0]), self.params.C, self.params.G_bar,
-            self._ref, self.has_reference, self._f, self._off, self._est_err, self.Q, self.R, self._u0,
-            self._all_index, out)
+        cost, self._track_err, self._x_norm = write_features_packed(
+            s.x, s.z, s.x_r, s.gamma, s.gamma_s, s.v, float(s.t[0]), self._W, self._SF, self._SI,
+            self.has_reference, out)
         self._cost = cost
         self._obs_all = out
 

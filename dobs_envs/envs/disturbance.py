@@ -9,9 +9,9 @@ __all__ = ["DisturbanceRejectionEnv", "NE3_ACTION_BOUND"]
 
 #: Per-input bounds on NE3: 1.5 x the largest |u^k| of the reference (adaptive
 #: sliding-mode) policy over 20 seeded episodes of the default distribution
-#: (measured 6.5, 12.1, 5.0, 37.5, 4.1 with the exosystem disturbance and
-#: 6.6, 12.2, 5.1, 37.6, 4.3 with disturbance="random" at the default control period),
-#: rounded up to a multiple of 5.
+#: (measured 6.5, 12.1, 5.0, 37.5, 4.1 with the exosystem disturbance,
+#: 5.7, 10.5, 5.0, 37.5, 3.1 with disturbance="random" and 5.2, 10.1, 5.0, 37.5, 3.1 with
+#: "none", at the default control period), rounded up to a multiple of 5.
 NE3_ACTION_BOUND = (10.0, 20.0, 10.0, 60.0, 10.0)
 
 

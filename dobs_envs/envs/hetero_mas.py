@@ -12,7 +12,7 @@ __all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND"]
 #: Per-agent input bounds of hetero_mas_v0: 1.5 x the largest |u_i| of the reference
 #: (rendezvous LQR on the own estimate) policy over 20 seeded episodes of the default
 #: initial-state distribution at the default control period, rounded up to a multiple of 5
-#: (measured: see HeteroMASEnv docstring).
+#: (measured 1.26, 1.85, 5.78, 5.64, 7.16).
 NE1_ACTION_BOUND = (5.0, 5.0, 10.0, 10.0, 15.0)
 
 

@@ -257,3 +257,32 @@ def clip_inplace(u, lo, hi):
         elif u[j] > hi[j]:
             u[j] = hi[j]
     return True
+
+
+def pack_static(C, G, ref, Q, R, off, idx, F):
+    """Static arrays of :func:`write_features_packed`: one float and one int buffer (fewer
+    arguments = cheaper compiled-call dispatch on the per-step path)."""
+    C, G, ref, Q, R = (np.ascontiguousarray(a, dtype=np.float64) for a in (C, G, ref, Q, R))
+    N, p, n = C.shape
+    m = R.shape[0]
+    SF = np.concatenate([C.ravel(), G.ravel(), ref.ravel(), Q.ravel(), R.ravel()])
+    head = np.array([F, N, p, n, m, ref.shape[1], len(off), len(idx)], dtype=np.int64)
+    SI = np.concatenate([head, np.asarray(off, dtype=np.int64), np.asarray(idx, dtype=np.int64)])
+    return SF, SI
+
+
+@_njit
+def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
+    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
+    ``SF``/``SI`` from :func:`pack_static`."""
+    F, N, p, n, m, mr, no, ni = SI[0], SI[1], SI[2], SI[3], SI[4], SI[5], SI[6], SI[7]
+    a = 0
+    C = SF[a:a + N * p * n].reshape((N, p, n)); a += N * p * n
+    G = SF[a:a + N * n * p].reshape((N, n, p)); a += N * n * p
+    ref = SF[a:a + 3 * mr].reshape((3, mr)); a += 3 * mr
+    Q = SF[a:a + n * n].reshape((n, n)); a += n * n
+    R = SF[a:a + m * m].reshape((m, m))
+    off = SI[8:8 + no]
+    idx = SI[8 + no:8 + no + ni]
+    return write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, W[:F], off, W[F:F + N], Q, R,
+                          W[F + N:F + N + m], idx, out)

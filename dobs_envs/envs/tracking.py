@@ -10,7 +10,7 @@ __all__ = ["TrackingEnv", "NE2_ACTION_BOUND"]
 #: Per-input bounds of tracking_v0 on NE2: 1.5 x the largest |u^k| the reference
 #: policy used over 20 seeded episodes of the default initial-state distribution
 #: (measured 9.3, 18.7, 14.9, 80.9, 5.4 at the default control period 0.05 s;
-#: 8.4, 16.3, 14.1, 78.9, 4.6 at control period 1e-3 s), rounded up to a multiple of 5.
+#: 8.4, 16.3, 14.1, 78.9, 4.6 over 4 seeds at control period 1e-3 s), rounded up to a multiple of 5.
 NE2_ACTION_BOUND = (15.0, 30.0, 25.0, 125.0, 10.0)
 
 
