@@ -57,7 +57,7 @@ BUDGETS = {
     "quick": {
         "episodes": 10,
         "env_kwargs": {},
-        "agents": {"ppo": 100_000, "sac": 10_000, "ppo_ma": 40_000},
+        "agents": {"ppo": 200_000, "sac": 10_000, "ppo_ma": 60_000},
         "hyperparams": {},
     },
     "full": {
