@@ -52,10 +52,19 @@ defective (Jordan) blocks are ill-conditioned: a nilpotent block of size
 circle of radius ``~1e-16^(1/k)`` (``~5e-4`` for the paper's 5-chain of
 integrators after an orthogonal change of basis), some with ``Re < -1e-8``.
 Classifying such eigenvalues one by one would call part of an integrator chain
-stable. We therefore cluster the computed eigenvalues (see
-:func:`_eigenvalue_clusters`) and classify each cluster by its *mean*, which
-is well conditioned; the invariant subspace is then taken from an ordered real
-Schur form.
+stable. We therefore cluster the computed eigenvalues and classify each
+cluster by its *mean*, which is well conditioned
+(:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`); the
+invariant subspace is then taken from an ordered real Schur form.
+
+A cluster is a set of computed eigenvalues that a perturbation of the size of
+the eigensolver's backward error could merge (a connected component of that
+pseudospectrum), *not* every eigenvalue within a radius ``~||M|| eps^(1/k)``:
+such a radius is of order one for a quotient map with one large eigenvalue
+(an invariant zero near ``-222`` when ``C B`` is small) or with several
+defective eigenvalues ``-1, 0, 1``, and lumped stable and unstable modes into
+one cluster classified by its mean -- an unstable unobserved mode was then
+called reconstructible.
 
 All rank decisions go through the SVD helpers of
 :mod:`dobs_envs.design.subspaces` with the optional absolute tolerance ``tol``
@@ -71,11 +80,11 @@ import scipy.linalg as sla
 from .subspaces import (
     DEFAULT_RTOL,
     annihilator,
+    classify_stable_eigenvalues,
     null_space,
     orth,
     orth_complement,
     rank_tol,
-    stable_mask,
     subspace_intersection,
     subspace_sum,
 )
@@ -238,72 +247,12 @@ def unobservable_subspace(A, C, tol: float | None = None) -> np.ndarray:
     return _unobservable(A, C, _check_tol(tol))
 
 
-def _eigenvalue_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
-    """Group computed eigenvalues that may come from one defective eigenvalue.
-
-    Backward-stable eigensolvers return the exact eigenvalues of ``M + dM``
-    with ``|dM| <= delta = 1e3 * k * eps * s`` (``s = max(1, |M|_2)``, the
-    factor ``1e3`` a safety margin on the usual ``O(k eps)`` backward error).
-    An eigenvalue of algebraic multiplicity ``m`` then splits into ``m``
-    computed values within ``rho(m) = (delta * s^(m-1))^(1/m)`` of it.
-    Clusters are connected components at distance ``2 rho(m)`` where ``m`` is
-    the size of the component; we start from ``m = k`` and split components
-    recursively with the threshold of their own size. Genuinely distinct
-    eigenvalues closer than ``2 rho(m)`` are treated as one (the resolution
-    limit of the classification, ~1e-6 for double and ~5e-3 for five-fold
-    eigenvalues at ``|M| ~ 1``).
-    """
-    k = ev.size
-    eps = np.finfo(float).eps
-    delta = 1e3 * max(k, 1) * eps * scale
-
-    def rho(m: int) -> float:
-        return (delta * scale ** (m - 1)) ** (1.0 / m)
-
-    def components(idx: np.ndarray, thr: float) -> list[np.ndarray]:
-        pts = ev[idx]
-        unvisited = set(range(idx.size))
-        comps = []
-        while unvisited:
-            stack = [unvisited.pop()]
-            comp = []
-            while stack:
-                a = stack.pop()
-                comp.append(a)
-                near = [b for b in unvisited if abs(pts[a] - pts[b]) <= thr]
-                for b in near:
-                    unvisited.discard(b)
-                    stack.append(b)
-            comps.append(idx[np.array(sorted(comp))])
-        return comps
-
-    def split(idx: np.ndarray, thr: float) -> list[np.ndarray]:
-        out = []
-        for comp in components(idx, thr):
-            t2 = 2.0 * rho(comp.size)
-            if t2 < thr and comp.size > 1:
-                out.extend(split(comp, t2))
-            else:
-                out.append(comp)
-        return out
-
-    if k == 0:
-        return []
-    return split(np.arange(k), 2.0 * rho(k) * (1.0 + 1e-12))
-
-
 def _unstable_subspace(M: np.ndarray) -> np.ndarray:
     k = M.shape[0]
     if k == 0:
         return np.zeros((0, 0))
-    s = float(np.linalg.norm(M, 2))
-    scale = max(1.0, s)
-    T, _ = sla.schur(M, output="real")
-    ev = np.linalg.eigvals(T)
-    unstable = np.zeros(k, dtype=bool)
-    for comp in _eigenvalue_clusters(ev, scale):
-        mean = np.mean(ev[comp])
-        unstable[comp] = not bool(stable_mask(np.array([mean]), s)[0])
+    ev, stable, _ = classify_stable_eigenvalues(M)
+    unstable = ~stable
     n_unst = int(unstable.sum())
     if n_unst == 0:
         return np.zeros((k, 0))
@@ -337,8 +286,8 @@ def unstable_subspace(M) -> np.ndarray:
     """Generalised eigenspace of ``M`` for the eigenvalues that are not strictly
     stable (``Re >= -STABILITY_TOL * max(1, |M|_2)``, marginal modes included).
 
-    Eigenvalues are classified per cluster (see :func:`_eigenvalue_clusters`)
-    by the cluster mean, so perturbed Jordan blocks of integrators stay
+    Eigenvalues are classified per cluster (see
+    :func:`~dobs_envs.design.subspaces.eigenvalue_clusters`) by the cluster mean, so perturbed Jordan blocks of integrators stay
     unstable as a whole; the subspace is read off an ordered real Schur form.
 
     Parameters

@@ -52,6 +52,7 @@ import scipy.linalg as sla
 
 from .subspaces import (
     annihilator,
+    classify_stable_eigenvalues,
     is_hurwitz,
     null_space,
     numerical_rank,
@@ -158,59 +159,6 @@ def _rank_factor(M: np.ndarray, tol: float | None):
     return Phi, Vt.T.copy(), r
 
 
-#: Largest spread (relative to the matrix norm) of a group of computed
-#: eigenvalues treated as one defective eigenvalue (see :func:`_eigen_clusters`).
-_CLUSTER_CAP = 1e-2
-
-
-def _eigen_clusters(ev: np.ndarray, scale: float) -> list[np.ndarray]:
-    """Group computed eigenvalues that may come from one defective eigenvalue.
-
-    A Jordan block of size ``m`` perturbed by round-off ``~eps*scale`` has
-    computed eigenvalues on a circle of radius ``~scale*(eps)^(1/m)`` around
-    the exact one, so that e.g. a 5-chain of integrators shows eigenvalues with
-    ``|Re| ~ 1e-3``; their *mean* (a trace) is well conditioned. A set ``S``
-    of ``m`` eigenvalues is accepted as a cluster when every member lies within
-    ``R_m = 2 * scale * (c*eps)^(1/m)`` of the mean of ``S`` (``c = 1e3``
-    allows for the conditioning of the orthogonal transformations applied
-    before the eigenvalue solver), capped at ``_CLUSTER_CAP * scale`` so that
-    distinct eigenvalues of a large matrix are not lumped together (the cap
-    still covers Jordan chains up to length ~6 at ``|M| ~ 1``; the NE2 chains
-    have length 5). For each unassigned eigenvalue (most
-    marginal first) the largest accepted set among its nearest unassigned
-    neighbours is taken. Simple, well separated eigenvalues stay singletons.
-    """
-    eps = np.finfo(float).eps
-    unassigned = list(np.argsort(np.abs(ev.real), kind="stable"))
-    clusters: list[np.ndarray] = []
-    while unassigned:
-        i = unassigned[0]
-        rest = np.array(unassigned)
-        order = rest[np.argsort(np.abs(ev[rest] - ev[i]), kind="stable")]
-        chosen = order[:1]
-        for size in range(order.size, 1, -1):
-            idx = order[:size]
-            spread = np.max(np.abs(ev[idx] - ev[idx].mean()))
-            if spread <= scale * min(2.0 * (1e3 * eps) ** (1.0 / size), _CLUSTER_CAP):
-                chosen = idx
-                break
-        clusters.append(chosen)
-        unassigned = [j for j in unassigned if j not in set(chosen.tolist())]
-    return clusters
-
-
-def _classify_stable(ev: np.ndarray, scale: float):
-    """Per-eigenvalue stability flag, decided cluster-wise by the cluster mean
-    with :func:`~dobs_envs.design.subspaces.stable_mask` (marginal = unstable),
-    and the cluster mean of each eigenvalue."""
-    flags = np.zeros(ev.size, dtype=bool)
-    means = np.empty(ev.size, dtype=complex)
-    for idx in _eigen_clusters(ev, scale):
-        means[idx] = ev[idx].mean()
-        flags[idx] = bool(stable_mask(means[idx][:1], scale)[0])
-    return flags, means
-
-
 def _unstable_invariant_subspace(M: np.ndarray, scale: float):
     """Orthonormal basis of the invariant subspace of ``M`` for its not-stable
     eigenvalues (Re >= -STABILITY_TOL*scale, marginal included), and the
@@ -218,8 +166,7 @@ def _unstable_invariant_subspace(M: np.ndarray, scale: float):
     k = M.shape[0]
     if k == 0:
         return np.zeros((0, 0)), np.zeros(0, dtype=complex)
-    ev = np.linalg.eigvals(M)
-    stable, means = _classify_stable(ev, scale)
+    ev, stable, means = classify_stable_eigenvalues(M, scale)
     n_unstable = int(np.sum(~stable))
     if n_unstable == 0:
         return np.zeros((k, 0)), means
@@ -254,30 +201,62 @@ def _unobservable_subspace(Pi3: np.ndarray, Pi4: np.ndarray, tol: float | None) 
     return V
 
 
-def _stabilising_injection(Pi3d: np.ndarray, Pi4d: np.ndarray, alpha: float) -> np.ndarray:
-    """``J_2`` with ``Pi3d + J_2 Pi4d`` Hurwitz with margin ``alpha`` (step 7).
+def _stabilising_injection(Pi3d: np.ndarray, Pi4d: np.ndarray, alpha: float, tol: float | None) -> np.ndarray:
+    """``J_2`` with ``Pi3d + J_2 Pi4d`` Hurwitz (Appendix step 7).
 
-    Dual shifted ARE ``(Pi3d + a I) X + X (Pi3d + a I)^T - X Pi4d^T Pi4d X + I = 0``,
-    ``J_2 = -X Pi4d^T``: then ``Pi3d + a I + J_2 Pi4d`` is Hurwitz, i.e. every
-    eigenvalue of ``Pi3d + J_2 Pi4d`` has ``Re < -a``. Requires the shifted pair
-    to be detectable; ``alpha`` is chosen below the decay rate of the fixed
-    (unobservable, stable) modes, and halved on failure.
+    The pair is split with an orthogonal observability decomposition (the
+    unobservable subspace ``V_o`` from SVD null spaces,
+    :func:`_unobservable_subspace`, ``W_o`` its orthonormal complement)::
+
+        [W_o V_o]^T Pi3d [W_o V_o] = [[A_o, 0], [A_21, A_f]],   Pi4d [W_o V_o] = [C_o, 0].
+
+    The fixed modes ``A_f`` (no ``J_2`` moves them) must be stable -- they are
+    the stable unobservable modes kept by the detectability decomposition of
+    step 6 -- and are checked. ``J_2 = W_o J_o`` with ``J_o`` from the dual
+    shifted ARE of the *observable* pair
+    ``(A_o + a I) X + X (A_o + a I)^T - X C_o^T C_o X + I = 0``,
+    ``J_o = -X C_o^T``, so the assignable eigenvalues have ``Re < -a`` and
+    ``E = Pi3d + J_2 Pi4d`` is block lower triangular with diagonal blocks
+    ``A_o + J_o C_o`` and ``A_f``. Working on the observable part keeps the
+    ARE well posed whatever the fixed modes are (an ARE on the whole pair
+    needs ``a`` below their decay rate and fails when they are nearly
+    unstable or the pair is nearly undetectable); ``a`` is halved only if the
+    ARE solver fails numerically.
     """
     r = Pi3d.shape[0]
+    Vo = _unobservable_subspace(Pi3d, Pi4d, tol)
+    Wo = null_space(Vo.T) if Vo.shape[1] else np.eye(r)
+    if Vo.shape[1]:
+        Af = Vo.T @ Pi3d @ Vo
+        _, fixed_stable, fixed_means = classify_stable_eigenvalues(Af, max(1.0, float(np.linalg.norm(Pi3d, 2))))
+        if not np.all(fixed_stable):
+            raise RuntimeError(
+                "Lemma 2 (FUIO): the unobservable modes of the detectable part of the step-6 pair "
+                f"are not all stable (cluster means {np.unique(np.round(fixed_means, 12))}); the "
+                "stable/unstable classification of the step-6 pair is numerically ill-conditioned"
+            )
+    ro = Wo.shape[1]
+    if ro == 0:
+        return np.zeros((r, Pi4d.shape[0]))
+    Ao = Wo.T @ Pi3d @ Wo
+    Co = Pi4d @ Wo
     last_exc = None
     a = alpha
     for _ in range(8):
         try:
             X = sla.solve_continuous_are(
-                (Pi3d + a * np.eye(r)).T, Pi4d.T, np.eye(r), np.eye(Pi4d.shape[0])
+                (Ao + a * np.eye(ro)).T, Co.T, np.eye(ro), np.eye(Co.shape[0])
             )
-            J2 = -X @ Pi4d.T
-            if np.all(np.isfinite(J2)) and is_hurwitz(Pi3d + J2 @ Pi4d):
-                return J2
+            Jo = -X @ Co.T
+            if np.all(np.isfinite(Jo)) and is_hurwitz(Ao + Jo @ Co):
+                return Wo @ Jo
         except (np.linalg.LinAlgError, ValueError) as exc:  # pragma: no cover - rare
             last_exc = exc
         a *= 0.5
-    raise RuntimeError(f"could not find a stabilising J_2 for the detectable pair (Appendix step 7): {last_exc}")
+    raise RuntimeError(  # pragma: no cover - an observable pair always has a solution
+        "could not find a stabilising J_2 for the observable part of the step-6 pair "
+        f"(Appendix step 7; observable dimension {ro}, numerically nearly unobservable): {last_exc}"
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -313,8 +292,9 @@ def strong_detectability(
         unit-free. Default: :func:`~dobs_envs.design.subspaces.rank_tol`.
     margin : float, optional
         Requested stability margin of the assignable part of ``E`` (in the time
-        unit of ``A``): the ARE that gives ``J_2`` is shifted by ``margin``
-        (reduced to half the decay rate of slower fixed modes if needed).
+        unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
+        part of the step-6 pair, :func:`_stabilising_injection`) is shifted by
+        ``margin``; the fixed (unobservable, stable) modes keep their values.
 
     Returns
     -------
@@ -390,8 +370,13 @@ def strong_detectability(
        harmless; ``E, F, G`` are mapped back exactly.
     3. Marginal eigenvalues of ``Pi_3`` on its unobservable subspace count as
        undetectable; defective eigenvalues are classified by cluster mean
-       (:func:`_eigen_clusters`), since e.g. the NE2 integrator chains give
-       computed eigenvalues with ``|Re| ~ 1e-3``.
+       (:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`),
+       since e.g. the NE2 integrator chains give computed eigenvalues with
+       ``|Re| ~ 1e-3``. Clusters are pseudospectral components (eigenvalues a
+       backward error of the eigensolver could merge), not a radius relative
+       to ``||Pi_3||``: a large invariant zero (e.g. ``-96`` after
+       normalisation when ``C B`` is small) made such a radius lump the
+       remaining zeros, stable and unstable, into one "stable" cluster.
     """
     A0, B0, C0 = _validate(A, B_unknown, C)
     n = A0.shape[0]
@@ -496,21 +481,17 @@ def strong_detectability(
         scale3 = max(1.0, float(np.linalg.norm(Pi3, 2)))
         if Vunobs.shape[1]:
             Au = Vunobs.T @ Pi3 @ Vunobs
-            Wu, fixed_stable = _unstable_invariant_subspace(Au, scale3)
+            Wu, _ = _unstable_invariant_subspace(Au, scale3)
             P_u = Vunobs @ Wu
         else:
             P_u = np.zeros((r_rho, 0))
-            fixed_stable = np.zeros(0, dtype=complex)
         P_d = null_space(P_u.T) if P_u.shape[1] else np.eye(r_rho)
         r_d = P_d.shape[1]
         if r_d:
             Pi3d = P_d.T @ Pi3 @ P_d
             Pi4d = Q4 @ P_d  # orthonormal rows since Q4 P_u = 0
-            if fixed_stable.size:
-                decay = float(np.min(-fixed_stable.real))
-                alpha = min(alpha, 0.5 * decay)
             if Pi4d.shape[0]:
-                J2 = _stabilising_injection(Pi3d, Pi4d, alpha)
+                J2 = _stabilising_injection(Pi3d, Pi4d, alpha, tol)
             else:
                 J2 = np.zeros((r_d, 0))
             E_dyn = Pi3d + J2 @ Pi4d
