@@ -144,17 +144,34 @@ def _control_period(x, z, gamma, gamma_s, v, x_r, u, r,
                 v[b, j] = vnew[j]
 
 
-def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
-    """Compiled counterpart of :func:`control_period_numpy` (same signature)."""
-    x = np.array(x, dtype=np.float64, order="C")
-    z = np.array(z, dtype=np.float64, order="C")
-    gamma = np.array(gamma, dtype=np.float64, order="C")
-    gamma_s = np.array(gamma_s, dtype=np.float64, order="C")
-    v = np.array(v, dtype=np.float64, order="C")
-    x_r = np.array(x_r, dtype=np.float64, order="C")
-    _control_period(x, z, gamma, gamma_s, v, x_r,
-                    np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
-                    p.A, p.B, p.B_v, p.C, p.E_bar, p.F_bar, p.G_bar, p.B_bar,
-                    p.Q_proj, p.proj_range, p.nbr_idx, p.nbr_w, p.degree, p.A_r,
-                    p.phi, p.phi_s, p.sigma, p.sigma_s, p.Phi_v, p.dt, p.substeps, p.has_reference)
+@_njit
+def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r,
+                         A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+                         phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference):
+    # copies made inside compiled code: ~4 us cheaper per call than numpy .copy() x 6
+    x = x.copy()
+    z = z.copy()
+    gamma = gamma.copy()
+    gamma_s = gamma_s.copy()
+    v = v.copy()
+    x_r = x_r.copy()
+    _control_period(x, z, gamma, gamma_s, v, x_r, u, r,
+                    A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+                    phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference)
     return x, z, gamma, gamma_s, v, x_r
+
+
+def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
+    """Compiled counterpart of :func:`control_period_numpy` (same signature).
+
+    State inputs must be C-contiguous float64 arrays (those of :class:`SimState`
+    are); they are copied, never modified.
+    """
+    if u.dtype != np.float64 or not u.flags.c_contiguous:
+        u = np.ascontiguousarray(u, dtype=np.float64)
+    if r.dtype != np.float64 or not r.flags.c_contiguous:
+        r = np.ascontiguousarray(r, dtype=np.float64)
+    return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r,
+                                p.A, p.B, p.B_v, p.C, p.E_bar, p.F_bar, p.G_bar, p.B_bar,
+                                p.Q_proj, p.proj_range, p.nbr_idx, p.nbr_w, p.degree, p.A_r,
+                                p.phi, p.phi_s, p.sigma, p.sigma_s, p.Phi_v, p.dt, p.substeps, p.has_reference)
