@@ -103,6 +103,9 @@ def metrics(sc, traj: Trajectory, dt: float) -> dict:
     - ``max_gamma``, ``max_gamma_s``, ``max_beta``: largest adaptive gains over the run (null if absent)
     - ``gain_growth_last_quarter``: per gain, ``max_i (g_i(t_end) - g_i(0.75 t_end))``
     - ``control_total_variation_last_5s``: ``sum_k sum_j |u_j(t_{k+1}) - u_j(t_k)|`` over the last 5 s
+    - ``control_total_variation_smoothed_last_5s``: the same after a 51-sample (0.05 s at
+      dt = 1e-3) moving average; the difference is the high-frequency (chattering) part
+    - ``control_max_increment_last_5s``: ``max_{k,j} |u_j(t_{k+1}) - u_j(t_k)|``, the chattering amplitude
     - ``max_abs_u``: largest input magnitude over the run
     """
     t_end = float(traj.t[-1])
@@ -113,6 +116,9 @@ def metrics(sc, traj: Trajectory, dt: float) -> dict:
     if traj.beta is not None:
         growth["beta"] = float(np.max(traj.beta[-1] - traj.beta[q]))
     u = traj.u[last5:-1]
+    win = min(51, len(u))
+    u_smooth = (np.array([np.convolve(u[:, j], np.ones(win) / win, mode="valid") for j in range(u.shape[1])]).T
+                if win > 1 else u)
     return {
         "scenario": sc.name,
         "final_estimation_error": float(np.max(traj.est_err[-1])),
@@ -125,6 +131,8 @@ def metrics(sc, traj: Trajectory, dt: float) -> dict:
         "max_beta": None if traj.beta is None else float(np.max(traj.beta)),
         "gain_growth_last_quarter": growth,
         "control_total_variation_last_5s": float(np.sum(np.abs(np.diff(u, axis=0)))) if len(u) > 1 else 0.0,
+        "control_total_variation_smoothed_last_5s": float(np.sum(np.abs(np.diff(u_smooth, axis=0)))) if len(u_smooth) > 1 else 0.0,
+        "control_max_increment_last_5s": float(np.max(np.abs(np.diff(u, axis=0)))) if len(u) > 1 else 0.0,
         "max_abs_u": float(np.max(np.abs(traj.u))),
         "t_end": t_end,
         "dt": float(dt),
