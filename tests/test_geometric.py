@@ -30,7 +30,9 @@ from dobs_envs.design.geometric import (
     unstable_subspace,
 )
 from dobs_envs.design.subspaces import (
+    classify_stable_eigenvalues,
     contains,
+    eigenvalue_clusters,
     is_hurwitz,
     null_space,
     orth,
@@ -417,6 +419,105 @@ def test_unstable_subspace_helper():
     assert same(U, e(3, 0, 2))
     assert unstable_subspace(-np.eye(2)).shape == (2, 0)
     assert unstable_subspace(np.zeros((2, 2))).shape == (2, 2)
+
+
+# ---------------------------------------------------------------------------
+# defective eigenvalues -1, 0, 1 (stress systems) and eigenvalue clusters
+# ---------------------------------------------------------------------------
+#: Permuted upper-triangular systems with eigenvalues -1, 0, 1 of multiplicity
+#: 3-5 (Jordan chains), one unknown input, outputs = rows of the identity.
+#: (nonzeros of A, B, indices of the measured states, exact delta). The exact
+#: deltas were computed with rational arithmetic (sympy: S*, quotient pair
+#: (A_q, C_q), unobservable subspace, characteristic polynomial factored over
+#: Q, generalised eigenspaces of the roots with Re >= 0).
+STRESS_SYSTEMS = [
+    (
+        [(0, 2, -0.0282), (0, 4, -1.537), (0, 5, 0.7268), (0, 6, -2.0698), (0, 7, -1.2678),
+         (1, 1, -1.0), (1, 8, 1.5386), (2, 2, 1.0), (2, 6, 1.2022), (2, 8, -0.738), (3, 3, -1.0),
+         (3, 5, 0.4831), (3, 6, -0.9002), (3, 7, -0.7509), (3, 9, 0.7651), (4, 7, 0.8366),
+         (4, 8, -0.9429), (5, 5, 1.0), (5, 7, 1.0341), (6, 6, -1.0), (7, 7, 1.0), (7, 8, -1.0804),
+         (8, 8, 1.0)],
+        [0.5468, 0.0, -1.6005, 0.0, 0.6999, -0.0752, 0.2195, 0.0, 0.0, -2.1658],
+        [5, 7], 10, 6,
+    ),
+    (
+        [(0, 1, 2.1065), (0, 2, 2.4836), (0, 6, -0.0139), (0, 7, 0.154), (0, 8, 0.1097),
+         (1, 3, 0.8986), (1, 5, -0.3803), (1, 6, -1.283), (2, 2, -1.0), (2, 5, -0.2882),
+         (2, 6, -0.4491), (2, 7, 0.4563), (3, 3, 1.0), (3, 4, 0.4184), (3, 7, 0.5137),
+         (3, 8, 1.4999), (4, 4, 1.0), (4, 6, 0.2584), (4, 7, 0.4276), (4, 8, 0.7678), (5, 5, 1.0),
+         (5, 7, -0.7665), (5, 8, 0.0128), (7, 7, 1.0), (8, 8, 1.0)],
+        [0.0, -1.0897, 1.1223, 0.4945, -1.2704, 0.054, 0.0, 0.332, 0.84],
+        [5], 9, 2,
+    ),
+    (
+        [(0, 0, -1.0), (0, 2, -0.4553), (0, 8, -0.6544), (1, 1, 1.0), (1, 4, 1.519),
+         (1, 6, -0.4775), (2, 2, -1.0), (3, 3, -1.0), (3, 5, -0.678), (3, 6, -0.297), (4, 4, 1.0),
+         (5, 5, 1.0), (7, 9, 0.1139), (8, 8, -1.0), (8, 9, 1.0046), (9, 9, -1.0)],
+        [0.0, 0.2913, 2.5313, 1.7822, 1.7465, -0.265, -0.3406, 0.0, -0.0802, 0.0],
+        [6], 10, 6,
+    ),
+]
+
+
+def stress_system(k):
+    entries, b, rows, n, delta = STRESS_SYSTEMS[k]
+    A = np.zeros((n, n))
+    for i, j, v in entries:
+        A[i, j] = v
+    return A, np.array(b)[:, None], np.eye(n)[rows], delta
+
+
+@pytest.mark.parametrize("k", range(3))
+@pytest.mark.parametrize("rotate", [False, True])
+def test_defective_stress_systems(k, rotate):
+    """A cluster radius ~||A_q|| eps^(1/k) (of order one here) lumped the
+    defective eigenvalues -1, 0, 1 of the quotient map into one cluster
+    classified by its mean: delta came out 10, 1, 10 instead of 6, 2, 6 (on
+    the third system an unobserved unstable state was called reconstructible)."""
+    A, B, C, delta = stress_system(k)
+    if rotate:
+        Q = np.linalg.qr(np.random.default_rng(k).standard_normal(A.shape))[0]
+        A, B, C = Q.T @ A @ Q, Q.T @ B, C @ Q
+    dec = reconstructibility_decomposition(A, B, C)
+    assert dec.delta == delta
+    # consistency of the decomposition: S_stab is conditioned invariant and
+    # the unreconstructible directions are unobserved
+    assert np.allclose(C @ dec.unreconstructible, 0, atol=1e-10)
+    X = dec.unreconstructible
+    assert contains(dec.S_stab, A @ X, tol=1e-7)
+
+
+def test_eigenvalue_clusters_resolve_distinct_eigenvalues():
+    """Clusters are pseudospectral components, not a radius relative to ||M||."""
+    rng = np.random.default_rng(0)
+    # one large eigenvalue does not lump the small, distinct ones
+    Q = np.linalg.qr(rng.standard_normal((7, 7)))[0]
+    ev0 = np.array([-222.0, 1.25, -1.5, -0.75, 0.17, -0.18, -0.36])
+    ev, clusters = eigenvalue_clusters(Q.T @ np.diag(ev0) @ Q)
+    assert len(clusters) == 7
+    _, stable, _ = classify_stable_eigenvalues(Q.T @ np.diag(ev0) @ Q)
+    assert sorted(ev[~stable].real.round(8)) == [0.17, 1.25]
+    # rotated Jordan blocks: each block is one cluster, neighbours (0.21 apart) are not joined
+    J = sla.block_diag(*[v * np.eye(4) + np.diag(np.ones(3), 1) for v in np.linspace(-1, 1, 6)])
+    Q = np.linalg.qr(rng.standard_normal(J.shape))[0]
+    ev, clusters = eigenvalue_clusters(Q.T @ J @ Q)
+    assert sorted(len(c) for c in clusters) == [4] * 6
+    assert np.allclose(sorted(ev[c].mean().real for c in clusters), np.linspace(-1, 1, 6), atol=1e-10)
+    # exactly repeated semisimple / defective eigenvalues stay together
+    ev, clusters = eigenvalue_clusters(np.diag([-1.0, -1.0, 0.0, 1.0]) + np.diag([0.0, 0.0, 1.0], 1))
+    assert sorted(len(c) for c in clusters) == [1, 1, 2]
+
+
+def test_stability_undecidable_cluster_raises():
+    """A 3-Jordan block at -1e-7 (stable) has computed eigenvalues ~5e-6 apart,
+    straddling the axis: with a stable mean it is not classified (error)."""
+    Q = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))[0]
+    M = Q.T @ (-1e-7 * np.eye(3) + np.diag([1.0, 1.0], 1)) @ Q
+    with pytest.raises(np.linalg.LinAlgError, match="stability"):
+        classify_stable_eigenvalues(M)
+    # the same block at 0 is marginal, i.e. not stable (integrator chain)
+    _, stable, _ = classify_stable_eigenvalues(Q.T @ np.diag([1.0, 1.0], 1) @ Q)
+    assert not np.any(stable)
 
 
 # ---------------------------------------------------------------------------

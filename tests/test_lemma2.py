@@ -250,6 +250,61 @@ def test_repeated_fixed_modes_regression():
     assert res.delta == 6
 
 
+def _siso_large_zero(seed):
+    """SISO plant in zero-dynamics normal form, rotated: x = (y, eta),
+    y' = -0.5 y + c^T eta + u, eta' = Z eta + d y, y = x_1. The invariant zeros
+    are eig(Z) (exact by construction): one large (-222) and two unstable
+    (1.25, 0.17). delta = n - #unstable zeros = 8 - 2 = 6."""
+    zeros = [-222.0, 1.25, -1.5, -0.75, 0.17, -0.18, -0.36]
+    rng = np.random.default_rng(seed)
+    k = len(zeros)
+    P = rng.standard_normal((k, k))
+    A = np.zeros((k + 1, k + 1))
+    A[0, 0] = -0.5
+    A[0, 1:] = rng.standard_normal(k)
+    A[1:, 0] = rng.standard_normal(k)
+    A[1:, 1:] = np.linalg.solve(P, np.diag(zeros) @ P)
+    Q = np.linalg.qr(rng.standard_normal((k + 1, k + 1)))[0]
+    return Q.T @ A @ Q, Q.T[:, [0]], Q[[0]], zeros
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_large_invariant_zero_regression(seed):
+    """A large invariant zero made ||Pi_3|| large, and a cluster radius relative
+    to it lumped the two unstable zeros with the stable ones: the step-6 pair
+    kept them in its "detectable" part and the ARE for J_2 failed ("Failed to
+    find a finite solution"). delta = 6 follows from the invariant zeros (SISO,
+    relative degree 1: S* = Im B, the quotient map has the zeros as spectrum
+    and no output)."""
+    A, B, C, zeros = _siso_large_zero(seed)
+    res = strong_detectability(A, B, C)
+    check_contract(A, B, C, res)
+    assert res.delta == A.shape[0] - sum(z >= 0 for z in zeros) == 6
+    # the fixed modes of E are the stable zeros; the rest respect the margin
+    ev = np.linalg.eigvals(res.E)
+    stable_zeros = np.array([z for z in zeros if z < 0])
+    is_fixed = np.min(np.abs(ev[:, None] - stable_zeros[None, :]), axis=1) < 1e-6 * 222
+    assert is_fixed.sum() == stable_zeros.size
+    assert np.all(ev[~is_fixed].real < -0.2)
+
+
+@pytest.mark.parametrize("seed, deltas", [(1, [6, 6, 7, 8, 1]), (19, [8, 6, 6, 6, 7])])
+def test_random_plant_design_regression(seed, deltas):
+    """random_plant_scenario(8, 3, 5, seed=1 / 19) raised "could not find a
+    stabilising J_2" at node 0 (seed 1) and node 1 (seed 19): SISO nodes with
+    invariant zeros near -222 and two unstable ones. The per-node deltas were
+    checked with exact rational arithmetic on the extracted node data (sympy:
+    S*, quotient pair, characteristic polynomial factored over Q, unstable
+    eigenspaces at 80 digits)."""
+    from dobs_envs.scenarios.random import random_plant_scenario
+
+    design = random_plant_scenario(8, 3, 5, seed=seed, verify=False).design
+    assert list(design.delta) == deltas
+    for i in range(len(deltas)):
+        A, B, C = design.A, design.B_unknown(i), design.C_node(i)
+        check_contract(A, B, C, strong_detectability(A, B, C))
+
+
 def test_stable_decoupled_state_and_input_driven_output():
     """x1' = -x1 (no output), x2' = u, y = x2: x1 by z' = -z, x2 = y. The
     unknown input is recovered from y', so r_d = 2 > p = 1 in step 6."""

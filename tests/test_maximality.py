@@ -170,6 +170,44 @@ def test_rotated_scaled_jordan_chains(seed):
 
 
 # ---------------------------------------------------------------------------
+# regressions: large invariant zeros, defective eigenvalues -1, 0, 1
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", range(3))
+def test_large_invariant_zero(seed):
+    """SISO normal form with zeros {-222, 1.25, 0.17 (unstable), ...}: geometric
+    said delta = 8 and lemma2 failed in the ARE for J_2 (clusters lumped the
+    small zeros); both must give 8 - 2 = 6 (see test_lemma2)."""
+    from test_lemma2 import _siso_large_zero
+
+    A, B, C, _ = _siso_large_zero(seed)
+    assert compare(A, B, C)[0] == 6
+
+
+@pytest.mark.parametrize("k", range(3))
+def test_defective_stress_systems(k):
+    """Exact deltas 6, 2, 6 (rational arithmetic, see test_geometric);
+    geometric gave 10, 1, 10 when it lumped the eigenvalues -1, 0, 1."""
+    from test_geometric import stress_system
+
+    A, B, C, delta = stress_system(k)
+    assert compare(A, B, C)[0] == delta
+
+
+@pytest.mark.parametrize("seed, deltas", [(1, [6, 6, 7, 8, 1]), (19, [8, 6, 6, 6, 7])])
+def test_random_plant_nodes(seed, deltas):
+    """Node data of random_plant_scenario(8, 3, 5, seed) (exact deltas, see
+    test_lemma2.test_random_plant_design_regression): geometric said 8 at
+    seed 1 node 0 and seed 19 node 1 (two unstable zeros next to one at -222)."""
+    from dobs_envs.scenarios.random import random_plant_scenario
+
+    sc = random_plant_scenario(8, 3, 5, seed=seed, verify=False)
+    for i, delta in enumerate(deltas):
+        # eq. (splitinput): the channels node i does not know, and B_v
+        B = np.hstack([ch for k, ch in enumerate(sc.channels) if k not in sc.known[i]] + [sc.B_v])
+        assert compare(sc.A, B, np.atleast_2d(sc.C[i]))[0] == delta
+
+
+# ---------------------------------------------------------------------------
 # random systems
 # ---------------------------------------------------------------------------
 _SPEC_REAL = [-2.0, -1.0, -0.5, 0.0, 0.0, 0.5, 1.0]
