@@ -216,6 +216,30 @@ def test_termination_on_state_bound():
         env.step(hi)
 
 
+@pytest.mark.parametrize("penalty", [True, False])
+def test_termination_penalty_charges_the_rest_of_the_horizon(penalty):
+    """With a cost-type reward, diverging early must not pay: the terminating step is
+    charged lambda_max(Q) * bound^2 * period for every remaining step of the horizon."""
+    bound = 15.0
+    env = tracking_v0.parallel_env(state_bound=bound, termination_penalty=penalty)
+    env.reset(seed=0)
+    hi = {a: env.action_space(a).high for a in env.agents}
+    steps, rewards = 0, []
+    while env.agents:
+        _, rew, term, _, _ = env.step(hi)
+        steps += 1
+        rewards.append(rew["controller_0"])
+    assert term["controller_0"] and steps < 400
+    x, x_r = env.sim_state.x[0], env.sim_state.x_r[0]
+    u = np.concatenate([hi[a] for a in env.possible_agents]).astype(float)
+    step_cost = ((x - x_r) @ (x - x_r) + u @ u) * env.control_period  # Q = I, R = I
+    expected_penalty = bound**2 * env.control_period * (400 - steps) if penalty else 0.0
+    assert rewards[-1] == pytest.approx(-step_cost - expected_penalty, rel=1e-9)
+    if penalty:
+        # the diverging episode is worse than sitting exactly on the bound for the whole horizon
+        assert sum(rewards) < -bound**2 * env.control_period * (400 - steps)
+
+
 def test_timing_options():
     env = tracking_v0.parallel_env(dt=2e-3, substeps=10, horizon=1.0)
     assert env.control_period == pytest.approx(0.02) and env.max_cycles == 50

@@ -44,6 +44,7 @@ COMMON_OPTIONS = {
     "action_bound": None,
     "init_noise": None,
     "state_bound": 1e3,
+    "termination_penalty": True,
     "render_mode": None,
 }
 
@@ -119,6 +120,10 @@ class DObsParallelEnv(ParallelEnv):
         self.dt, self.substeps = float(dt), int(substeps)
         self.control_period = self.dt * self.substeps
         self.max_cycles = self._resolve_horizon(opts, sc)
+        # horizon charged by the termination penalty: the truncation horizon, or (no
+        # truncation, e.g. under gym's TimeLimit) the scenario's t_end in control steps
+        self._penalty_cycles = self.max_cycles if self.max_cycles is not None else \
+            max(1, int(round(sc.t_end / self.control_period)))
 
         noise = opts["init_noise"]
         if noise is not None and not (np.isfinite(noise) and noise >= 0):
@@ -218,6 +223,14 @@ class DObsParallelEnv(ParallelEnv):
         if not (np.isfinite(sb) and sb > 0):
             raise ValueError(f"state_bound must be a positive finite number, got {sb!r}")
         self.state_bound = float(sb)
+        # Cost of sitting on the bound for one control step: lambda_max(Q) * state_bound^2 * T.
+        # With a cost-type (negative) reward, ending the episode early would otherwise be
+        # *rewarded* (fewer negative steps): on termination the agents are charged this
+        # per-step cost for every remaining step of the horizon, so diverging is never
+        # better than staying inside the bound.
+        self.termination_penalty = bool(opts["termination_penalty"])
+        self._bound_step_cost = float(np.linalg.eigvalsh(0.5 * (self.Q + self.Q.T))[-1]) * self.state_bound ** 2 \
+            * self.control_period
 
         # --- preallocated step buffers ------------------------------------------------
         # work buffer W = [f (feature vector) | estimation errors (N) | u (m)], see write_features_packed
@@ -496,8 +509,11 @@ class DObsParallelEnv(ParallelEnv):
             self._terminated, self._reason = True, "state_bound_exceeded"
         else:
             self._terminated, self._reason = False, None
-        if not math.isfinite(self._reward):
-            self._reward = -float(np.finfo(np.float64).max)
+        if self._terminated:
+            if not math.isfinite(self._reward):
+                self._reward = -self._bound_step_cost
+            if self.termination_penalty:
+                self._reward -= self._bound_step_cost * max(0, self._penalty_cycles - self._cycles)
         if self._history is not None:
             h = self._history
             h[0].append(float(self._sim.t[0])); h[1].append(self._task_error()); h[2].append(self._est_err.copy())
@@ -605,7 +621,11 @@ def make_parallel_env(scenario, **options) -> DObsParallelEnv:
     - ``action_bound`` (``scenario.metadata['action_bound']`` or 50): per input component.
     - ``init_noise`` (None): half-width of the uniform noise added to ``x0`` at reset
       (None: the scenario's ``x0_scale`` distribution if it has one, else 1.0).
-    - ``state_bound`` (1e3): episode terminates when ``||x|| > state_bound``.
+    - ``state_bound`` (1e3): episode terminates when ``||x|| > state_bound``;
+      ``termination_penalty`` (True): the terminating step's reward also charges
+      ``lambda_max(Q) * state_bound^2 * period`` per remaining step of the horizon
+      (staying on the bound until the end; without truncation, until the scenario's
+      ``t_end``), so that diverging early never pays.
     - ``disturbance`` ("exosystem" | "random" | "none") and ``disturbance_amplitude`` (2.0)
       for systems with an unknown input.
     - ``render_mode`` (None | "rgb_array").

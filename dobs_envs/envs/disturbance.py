@@ -79,6 +79,10 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
 
     Terminated when ``||x|| > state_bound`` (1e3) or ``x`` is not finite;
     truncated after ``max_cycles`` (default 400 control steps = 20 s).
+    On termination the reward of that step also charges the cost of staying on the
+    bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
+    remaining control step (``termination_penalty=False`` disables it), so ending an
+    episode early by diverging is never better than staying.
 
     ## Info
 

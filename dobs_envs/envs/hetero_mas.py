@@ -69,6 +69,10 @@ class HeteroMASEnv(DObsParallelEnv):
 
     Terminated when ``||x|| > state_bound`` (1e3); truncated after ``max_cycles``
     (default 600 control steps = NE1's 30 s).
+    On termination the reward of that step also charges the cost of staying on the
+    bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
+    remaining control step (``termination_penalty=False`` disables it), so ending an
+    episode early by diverging is never better than staying.
 
     ## Info
 
@@ -80,7 +84,7 @@ class HeteroMASEnv(DObsParallelEnv):
 
     ``hetero_mas_v0.parallel_env(q_rest=0.1, r=1.0, rho=1e-3, dt=1e-3, substeps=50,
     max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
-    R=None, action_bound=None, init_noise=None, state_bound=1e3, render_mode=None,
+    R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True, render_mode=None,
     scenario=None)``; ``q_rest``, ``r``, ``rho`` parametrise the task
     (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
     takes any multi-agent Scenario (``mas_agents``).

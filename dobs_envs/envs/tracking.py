@@ -80,6 +80,10 @@ class TrackingEnv(DObsParallelEnv):
     (``info[agent]["termination_reason"]``); truncated after ``max_cycles``
     control steps (default 400 = the paper's 20 s at the default 0.05 s control
     period; ``horizon=`` in seconds instead).
+    On termination the reward of that step also charges the cost of staying on the
+    bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
+    remaining control step (``termination_penalty=False`` disables it), so ending an
+    episode early by diverging is never better than staying.
 
     ## Info
 
@@ -90,7 +94,7 @@ class TrackingEnv(DObsParallelEnv):
 
     ``tracking_v0.parallel_env(dt=1e-3, substeps=50, max_cycles=None, horizon=None,
     observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
-    init_noise=None, state_bound=1e3, render_mode=None, scenario=None)``.
+    init_noise=None, state_bound=1e3, termination_penalty=True, render_mode=None, scenario=None)``.
     ``dt`` is the Euler step of the simulation and ``substeps`` the number of
     Euler steps per control step (inputs held, ZOH): control period
     ``dt * substeps`` = 0.05 s by default; ``substeps=1`` is the paper's
