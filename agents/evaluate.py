@@ -11,7 +11,7 @@ Per-episode metrics (read from the underlying simulation, identical for all poli
 - ``return``: sum of the team reward ``-(e'Qe + u'Ru) * period``;
 - ``final_tracking_error``: the task error at the last step: ``||x - x_r||`` (tracking),
   ``||x||`` (stabilisation), the position disagreement ``||p - pbar 1||`` (hetero_mas
-  rendezvous) -- the environment's ``_task_error()`` (what its ``render()`` plots);
+  rendezvous) -- the environment's ``task_error()`` (what its ``render()`` plots);
 - ``rms_estimation_error``: RMS over time and observer nodes of ``||xhat_i - x||`` of the
   environment's distributed observer (it runs whatever the policy does);
 - ``control_effort``: ``int ||u||^2 dt`` of the applied (clipped) input;
@@ -61,8 +61,7 @@ class EpisodeResult:
 
 
 def _task_error(base) -> float:
-    fn = getattr(base, "_task_error", None)
-    return float(fn()) if callable(fn) else float(base.tracking_error)
+    return float(base.task_error())
 
 
 def _clipped(u, space):

@@ -403,7 +403,7 @@ class DObsParallelEnv(ParallelEnv):
         self._terminated = False
         self._features()
         if self.render_mode is not None:
-            self._history = ([float(self._sim.t[0])], [self._task_error()], [self._est_err.copy()])
+            self._history = ([float(self._sim.t[0])], [self.task_error()], [self._est_err.copy()])
         obs = self._observations()
         infos = self._infos(None)
         return obs, infos
@@ -516,7 +516,7 @@ class DObsParallelEnv(ParallelEnv):
                 self._reward -= self._bound_step_cost * max(0, self._penalty_cycles - self._cycles)
         if self._history is not None:
             h = self._history
-            h[0].append(float(self._sim.t[0])); h[1].append(self._task_error()); h[2].append(self._est_err.copy())
+            h[0].append(float(self._sim.t[0])); h[1].append(self.task_error()); h[2].append(self._est_err.copy())
 
     def _features(self):
         """Write the feature vector ``f`` (see :mod:`.observation`), the estimation errors,
@@ -598,8 +598,9 @@ class DObsParallelEnv(ParallelEnv):
     #: label of the task error in render(); None: ||x - x_r|| or ||x||
     TASK_ERROR_LABEL = None
 
-    def _task_error(self) -> float:
-        """The task error plotted by render() (default: the tracking error)."""
+    def task_error(self) -> float:
+        """The task's error now: ``||x - x_r||`` (or ``||x||``) by default, the rendezvous
+        disagreement for hetero_mas. It is what render() plots and what the benchmark reports."""
         return self._track_err
 
     def close(self):

@@ -121,10 +121,10 @@ class HeteroMASEnv(DObsParallelEnv):
             return np.array(NE1_ACTION_BOUND)
         return super()._default_action_bound(sc)
 
-    def _task_error(self) -> float:
+    def task_error(self) -> float:
         p = self._sim.x[0, self._pos]
         d = p - p.mean()
         return math.sqrt(float(d @ d))
 
     def _shared_info(self) -> dict:
-        return {"disagreement": self._task_error()}
+        return {"disagreement": self.task_error()}
