@@ -136,10 +136,18 @@ class SeparationController:
         -------
         u : (B, m), new ControllerState
         """
-        xl = self.linked_estimates(xhat)
+        r = self.reference(t) if self.kind == "tracking" else None
+        return self.act_rows(self.linked_estimates(xhat), r, cstate, period)
+
+    def act_rows(self, xl: np.ndarray, r, cstate: ControllerState, period: float):
+        """The control laws given, for every input row ``j``, the estimate its
+        controller node uses: ``xl (B, m, n)``; ``r (B, m)`` is the reference
+        command (tracking only). This is the single implementation of the laws;
+        :meth:`act` and :class:`baselines.policies.SeparationPolicy` call it.
+        """
         u = np.einsum("jn,bjn->bj", self.K, xl)
         if self.kind == "tracking":
-            u = u + self.reference(t)
+            u = u + r
         beta = cstate.beta
         if self.BtP is not None:
             w = np.einsum("jn,bjn->bj", self.BtP, xl)  # (B^k)^T P xhat_k, stacked

@@ -29,9 +29,9 @@ float64; out-of-range values would be clipped by the environment).
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .paper import SeparationController
 
 __all__ = ["SeparationPolicy", "CentralizedSeparationPolicy", "ZeroPolicy"]
 
@@ -65,73 +65,67 @@ class SeparationPolicy:
         kind = kind or sc.controller
         if kind not in self.KINDS:
             raise ValueError(f"kind must be one of {self.KINDS}, got {kind!r}")
-        if kind != "open_loop" and sc.K is None:
-            raise ValueError(f"{kind!r} policy needs the scenario's feedback gain K")
-        if kind in ("sliding_mode", "adaptive_sliding_mode") and sc.P is None:
-            raise ValueError(f"{kind!r} policy needs the scenario's sliding-mode matrix P")
-        if kind == "open_loop" and sc.prescribed_input is None:
-            raise ValueError("'open_loop' policy needs the scenario's prescribed_input")
+        if kind == "open_loop":
+            if sc.prescribed_input is None:
+                raise ValueError("'open_loop' policy needs the scenario's prescribed_input")
+            self._law = None
+        else:
+            if sc.K is None:
+                raise ValueError(f"{kind!r} policy needs the scenario's feedback gain K")
+            if kind in ("sliding_mode", "adaptive_sliding_mode") and sc.P is None:
+                raise ValueError(f"{kind!r} policy needs the scenario's sliding-mode matrix P")
+            # the laws themselves live in baselines.paper (one implementation)
+            self._law = SeparationController.from_scenario(sc, kind)
         self.kind = kind
         self.agents = list(base.possible_agents)
         self.period = float(base.control_period)
         self._slices = tuple(base.channel_slices)
-        self._xhat, self._r, self._K, self._BtP = {}, {}, {}, {}
-        B = sc.B
-        for k, a in enumerate(self.agents):
+        self._widths = np.array([sl.stop - sl.start for sl in self._slices])
+        self._m = int(self._widths.sum())
+        self._xhat, self._r = {}, {}
+        for a in self.agents:
             lay = base.observation_layout(a)
-            sl = self._slices[k]
             if kind != "open_loop":
                 if "xhat" not in lay:
                     raise ValueError(f"the {kind!r} policy reads 'xhat' from the observation; agent {a!r}'s observation has {list(lay)}")
                 self._xhat[a] = lay["xhat"]
-                self._K[a] = np.ascontiguousarray(sc.K[sl])
             if kind == "tracking":
                 if "r" not in lay:
                     raise ValueError(f"the tracking policy reads 'r' from the observation; agent {a!r}'s observation has {list(lay)}")
                 self._r[a] = lay["r"]
-            if kind in ("sliding_mode", "adaptive_sliding_mode"):
-                self._BtP[a] = np.ascontiguousarray(B[:, sl].T @ sc.P)
         self._index = {a: k for k, a in enumerate(self.agents)}
-        self.beta0, self.sigma_beta, self.phi_beta, self.epsilon = sc.beta0, sc.sigma_beta, sc.phi_beta, sc.epsilon
-        s, T = self.sigma_beta, self.period
-        self._decay = math.exp(-s * T)
-        self._gain = (1.0 - self._decay) / s if s > 0 else T
         self._signal = sc.prescribed_input
         self.reset()
 
+    @property
+    def beta(self) -> np.ndarray:
+        """Current adaptive gains ``beta^k`` (one per controller node)."""
+        return self._cstate.beta[0]
+
+    @property
+    def beta0(self) -> float:
+        """Initial adaptive gain ``beta^k(0)``."""
+        return self._law.beta0
+
     def reset(self) -> None:
         """Start of an episode: ``beta^k = beta^k(0)``, open-loop clock ``t = 0``."""
-        self.beta = np.full(len(self.agents), self.beta0)
+        self._cstate = self._law.initial_state(1) if self._law is not None else None
         self._steps = 0
 
     def __call__(self, observations: dict) -> dict:
-        out = {}
-        kind = self.kind
-        if kind == "open_loop":
+        if self.kind == "open_loop":
             u = self._signal(self._steps * self.period)
             self._steps += 1
             return {a: u[self._slices[self._index[a]]].copy() for a in observations}
-        new_beta = self.beta.copy()
-        for a, o in observations.items():
-            xh = np.asarray(o[self._xhat[a]], dtype=np.float64)
-            u = self._K[a] @ xh
-            if kind == "tracking":
-                u = u + np.asarray(o[self._r[a]], dtype=np.float64)
-            elif kind != "feedback":
-                k = self._index[a]
-                w = self._BtP[a] @ xh
-                nw = math.sqrt(float(w @ w))
-                b = self.beta[k]
-                if kind == "sliding_mode":  # eq. (hfunc)
-                    u = u - (b * w / nw if nw > 0 else 0.0 * w)
-                else:  # eq. (hepsfunc), then eq. (adlawbeta) over one period
-                    h = w / nw if b * nw > self.epsilon else b * w / self.epsilon
-                    u = u - b * h
-                    new_beta[k] = self._decay * b + self._gain * self.phi_beta * nw
-            out[a] = u
-        self.beta = new_beta
+        # every input row j gets the estimate of the controller node owning it
+        xs = np.stack([np.asarray(observations[a][self._xhat[a]], dtype=np.float64) for a in self.agents])
+        xl = np.repeat(xs, self._widths, axis=0)[None]
+        r = None
+        if self.kind == "tracking":
+            r = np.concatenate([np.asarray(observations[a][self._r[a]], dtype=np.float64) for a in self.agents])[None]
+        u, self._cstate = self._law.act_rows(xl, r, self._cstate, self.period)
         self._steps += 1
-        return out
+        return {a: u[0, self._slices[self._index[a]]] for a in observations}
 
 
 class CentralizedSeparationPolicy:
