@@ -36,7 +36,6 @@ import numpy as np
 from .design.subspaces import (
     STABILITY_TOL,
     stable_mask,
-    numerical_rank,
     orth,
     orth_complement,
     rank_tol,

@@ -58,7 +58,6 @@ from .subspaces import (
     numerical_rank,
     orth,
     rank_tol,
-    stable_mask,
 )
 
 __all__ = ["StrongDetectability", "strong_detectability", "lemma2_residuals", "DEFAULT_MARGIN"]

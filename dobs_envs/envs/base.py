@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any
-
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding

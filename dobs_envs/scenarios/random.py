@@ -357,41 +357,62 @@ def random_mas_scenario(
                 min_unstable=min_unstable, similarity=bool(similarity), edge_prob=float(edge_prob),
                 shift=float(shift))
     rng = np.random.default_rng(seed)
+
+    def candidate(attempt):
+        agents = []
+        for i in range(N):
+            ni = int(rng.integers(sd[0], sd[1] + 1))
+            mi = int(rng.integers(idim[0], idim[1] + 1))
+            pi = int(rng.integers(odim[0], min(odim[1], ni) + 1)) if odim[0] <= ni else ni
+            modes = random_spectrum(rng, ni, real_range=real_range, imag_range=imag_range,
+                                    p_zero=p_zero, p_complex=p_complex, min_unstable=min(min_unstable, ni))
+            Ai = _companion(modes)
+            Bi = np.hstack([np.eye(ni)[:, -1:], rng.standard_normal((ni, mi - 1))])
+            Ci = np.vstack([np.eye(ni)[:1], rng.standard_normal((pi - 1, ni))])
+            if similarity:
+                T = _haar_orthogonal(rng, ni)
+                Ai, Bi, Ci = T.T @ Ai @ T, T.T @ Bi, Ci @ T
+            agents.append((Ai, Bi, Ci))
+        g = _make_graph(graph, N, edge_prob, rng)
+        A = block_diag(*[a for a, _, _ in agents])
+        n = A.shape[0]
+        offs = np.cumsum([0] + [a.shape[0] for a, _, _ in agents])
+        channels, C = [], []
+        for i, (Ai, Bi, Ci) in enumerate(agents):
+            Bk = np.zeros((n, Bi.shape[1])); Bk[offs[i]:offs[i + 1]] = Bi
+            Ck = np.zeros((Ci.shape[0], n)); Ck[:, offs[i]:offs[i + 1]] = Ci
+            channels.append(Bk); C.append(Ck)
+        base = dict(name=name, A=A, channels=channels, C=C, known=[(i,) for i in range(N)], graph=g,
+                    links=tuple(range(N)), mas_agents=tuple(agents), mas_shift=mas_shift,
+                    description=f"Random heterogeneous MAS (eq. HMAS), {N} agents, seed {seed}",
+                    metadata=dict(meta, attempt=attempt))
+        sc = _finish(rng, controller=controller, A=A, B=np.hstack(channels), shift=shift,
+                     x0_scale=x0_scale, base=base, overrides=overrides)
+        if verify:
+            _verify(sc)
+        return sc
+
+    return _first_valid(candidate, max_attempts, f"random_mas_scenario(n_agents={N}, seed={seed})")
+
+
+def _is_user_error(exc) -> bool:
+    """Errors from bad user arguments (Scenario field overrides, graph) are not retried."""
+    msg = str(exc)
+    return msg.startswith("Scenario.") or msg.startswith("graph ") or msg.startswith("Graph")
+
+
+def _first_valid(candidate, max_attempts, what: str):
+    """``candidate(attempt)`` for attempt = 0, 1, ... until one passes verification.
+
+    Numerical failures of a draw (:data:`_RETRY_ERRORS`) are retried from the same
+    random stream; errors in the user's arguments (and ``TypeError``) propagate.
+    Raises :class:`RandomScenarioError` after ``max_attempts`` failed draws.
+    """
     last = None
-    for attempt in range(_attempts(max_attempts)):
+    n_attempts = _attempts(max_attempts)
+    for attempt in range(n_attempts):
         try:
-            agents = []
-            for i in range(N):
-                ni = int(rng.integers(sd[0], sd[1] + 1))
-                mi = int(rng.integers(idim[0], idim[1] + 1))
-                pi = int(rng.integers(odim[0], min(odim[1], ni) + 1)) if odim[0] <= ni else ni
-                modes = random_spectrum(rng, ni, real_range=real_range, imag_range=imag_range,
-                                        p_zero=p_zero, p_complex=p_complex, min_unstable=min(min_unstable, ni))
-                Ai = _companion(modes)
-                Bi = np.hstack([np.eye(ni)[:, -1:], rng.standard_normal((ni, mi - 1))])
-                Ci = np.vstack([np.eye(ni)[:1], rng.standard_normal((pi - 1, ni))])
-                if similarity:
-                    T = _haar_orthogonal(rng, ni)
-                    Ai, Bi, Ci = T.T @ Ai @ T, T.T @ Bi, Ci @ T
-                agents.append((Ai, Bi, Ci))
-            g = _make_graph(graph, N, edge_prob, rng)
-            A = block_diag(*[a for a, _, _ in agents])
-            n = A.shape[0]
-            offs = np.cumsum([0] + [a.shape[0] for a, _, _ in agents])
-            channels, C = [], []
-            for i, (Ai, Bi, Ci) in enumerate(agents):
-                Bk = np.zeros((n, Bi.shape[1])); Bk[offs[i]:offs[i + 1]] = Bi
-                Ck = np.zeros((Ci.shape[0], n)); Ck[:, offs[i]:offs[i + 1]] = Ci
-                channels.append(Bk); C.append(Ck)
-            base = dict(name=name, A=A, channels=channels, C=C, known=[(i,) for i in range(N)], graph=g,
-                        links=tuple(range(N)), mas_agents=tuple(agents), mas_shift=mas_shift,
-                        description=f"Random heterogeneous MAS (eq. HMAS), {N} agents, seed {seed}",
-                        metadata=dict(meta, attempt=attempt))
-            sc = _finish(rng, controller=controller, A=A, B=np.hstack(channels), shift=shift,
-                         x0_scale=x0_scale, base=base, overrides=overrides)
-            if verify:
-                _verify(sc)
-            return sc
+            return candidate(attempt)
         except TypeError:
             raise
         except _RETRY_ERRORS as exc:
@@ -399,15 +420,9 @@ def random_mas_scenario(
                 raise
             last = exc
     raise RandomScenarioError(
-        f"random_mas_scenario(n_agents={N}, seed={seed}): no candidate passed verification in "
-        f"{max_attempts} attempts; last failure: {type(last).__name__}: {last}"
+        f"{what}: no candidate passed verification in {n_attempts} attempts; "
+        f"last failure: {type(last).__name__}: {last}"
     ) from last
-
-
-def _is_user_error(exc) -> bool:
-    """Errors from bad user arguments (Scenario field overrides, graph) are not retried."""
-    msg = str(exc)
-    return msg.startswith("Scenario.") or msg.startswith("graph ") or msg.startswith("Graph")
 
 
 # ---------------------------------------------------------------------- plant
@@ -534,76 +549,67 @@ def random_plant_scenario(
                 min_unstable=min_unstable, edge_prob=float(edge_prob),
                 unknown_input=bool(unknown_input), shift=float(shift))
     rng = np.random.default_rng(seed)
-    last = None
-    for attempt in range(_attempts(max_attempts)):
-        try:
-            # 1. A
-            modes = random_spectrum(rng, n, real_range=real_range, imag_range=imag_range, p_zero=p_zero,
-                                    p_complex=p_complex, min_unstable=min(min_unstable, n))
-            blocks = [np.array([[a]]) if b == 0 else np.array([[a, b], [-b, a]]) for a, b in modes]
-            M = block_diag(*blocks)
-            upper = np.triu(np.ones((n, n)), 1)
-            start = 0
-            for blk in blocks:  # keep the 2x2 diagonal blocks intact
-                w = blk.shape[0]
-                upper[start:start + w, start:start + w] = 0.0
-                start += w
-            M = M + upper * rng.normal(0.0, coupling, (n, n)) if coupling > 0 else M
-            Qo = _haar_orthogonal(rng, n)
-            A = Qo @ M @ Qo.T
-            # 2. channels
-            channels = [rng.standard_normal((n, int(rng.integers(ipc[0], ipc[1] + 1)))) for _ in range(Kc)]
-            # 3. outputs
-            perm, nodes = rng.permutation(n), rng.permutation(N)
-            owned = [[] for _ in range(N)]
-            for j in range(n):
-                owned[int(nodes[j]) if j < N else int(rng.integers(N))].append(int(perm[j]))
-            for i in range(N):
-                if not owned[i]:
-                    owned[i].append(int(rng.integers(n)))
-            if measurement == "selection":
-                C = [np.eye(n)[sorted(o)] for o in owned]
-            else:
-                C = [rng.standard_normal((len(o), n)) for o in owned]
-            # 4. known channels
-            known = []
-            for i in range(N):
-                ki = int(rng.integers(min(kpn[0], Kc), min(kpn[1], Kc) + 1))
-                known.append(tuple(sorted(int(k) for k in rng.choice(Kc, size=ki, replace=False))))
-            # 5. graph, 6. links
-            g = _make_graph(graph, N, edge_prob, rng)
-            links = []
-            for k in range(Kc):
-                cand = [i for i in range(N) if k in known[i]] or list(range(N))
-                links.append(int(cand[int(rng.integers(len(cand)))]))
-            B = np.hstack(channels)
-            base = dict(name=name, A=A, channels=channels, C=C, known=known, graph=g, links=links,
-                        description=(f"Random multi-channel plant: n={n}, {Kc} controller nodes, "
-                                     f"{N} observer nodes, seed {seed}"),
-                        metadata=dict(meta, attempt=attempt))
-            # 7. unknown input
-            if unknown_input:
-                base["B_v"] = B @ rng.standard_normal((B.shape[1], 2))
-                w = float(rng.uniform(*exo))
-                base["exosystem"] = np.array([[0.0, w], [-w, 0.0]])
-                base["v0"] = rng.uniform(-v0_scale, v0_scale, 2)
-            # 8. gains, signals, x0
-            sc = _finish(rng, controller=controller, A=A, B=B, shift=shift, x0_scale=x0_scale,
-                         base=base, overrides=overrides)
-            if verify:
-                _verify(sc)
-            return sc
-        except TypeError:
-            raise
-        except _RETRY_ERRORS as exc:
-            if _is_user_error(exc):
-                raise
-            last = exc
-    raise RandomScenarioError(
-        f"random_plant_scenario(n_states={n}, n_controllers={Kc}, n_observers={N}, seed={seed}): "
-        f"no candidate passed verification in {max_attempts} attempts; last failure: "
-        f"{type(last).__name__}: {last}"
-    ) from last
+
+    def candidate(attempt):
+        # 1. A
+        modes = random_spectrum(rng, n, real_range=real_range, imag_range=imag_range, p_zero=p_zero,
+                                p_complex=p_complex, min_unstable=min(min_unstable, n))
+        blocks = [np.array([[a]]) if b == 0 else np.array([[a, b], [-b, a]]) for a, b in modes]
+        M = block_diag(*blocks)
+        upper = np.triu(np.ones((n, n)), 1)
+        start = 0
+        for blk in blocks:  # keep the 2x2 diagonal blocks intact
+            w = blk.shape[0]
+            upper[start:start + w, start:start + w] = 0.0
+            start += w
+        M = M + upper * rng.normal(0.0, coupling, (n, n)) if coupling > 0 else M
+        Qo = _haar_orthogonal(rng, n)
+        A = Qo @ M @ Qo.T
+        # 2. channels
+        channels = [rng.standard_normal((n, int(rng.integers(ipc[0], ipc[1] + 1)))) for _ in range(Kc)]
+        # 3. outputs
+        perm, nodes = rng.permutation(n), rng.permutation(N)
+        owned = [[] for _ in range(N)]
+        for j in range(n):
+            owned[int(nodes[j]) if j < N else int(rng.integers(N))].append(int(perm[j]))
+        for i in range(N):
+            if not owned[i]:
+                owned[i].append(int(rng.integers(n)))
+        if measurement == "selection":
+            C = [np.eye(n)[sorted(o)] for o in owned]
+        else:
+            C = [rng.standard_normal((len(o), n)) for o in owned]
+        # 4. known channels
+        known = []
+        for i in range(N):
+            ki = int(rng.integers(min(kpn[0], Kc), min(kpn[1], Kc) + 1))
+            known.append(tuple(sorted(int(k) for k in rng.choice(Kc, size=ki, replace=False))))
+        # 5. graph, 6. links
+        g = _make_graph(graph, N, edge_prob, rng)
+        links = []
+        for k in range(Kc):
+            cand = [i for i in range(N) if k in known[i]] or list(range(N))
+            links.append(int(cand[int(rng.integers(len(cand)))]))
+        B = np.hstack(channels)
+        base = dict(name=name, A=A, channels=channels, C=C, known=known, graph=g, links=links,
+                    description=(f"Random multi-channel plant: n={n}, {Kc} controller nodes, "
+                                 f"{N} observer nodes, seed {seed}"),
+                    metadata=dict(meta, attempt=attempt))
+        # 7. unknown input
+        if unknown_input:
+            base["B_v"] = B @ rng.standard_normal((B.shape[1], 2))
+            w = float(rng.uniform(*exo))
+            base["exosystem"] = np.array([[0.0, w], [-w, 0.0]])
+            base["v0"] = rng.uniform(-v0_scale, v0_scale, 2)
+        # 8. gains, signals, x0
+        sc = _finish(rng, controller=controller, A=A, B=B, shift=shift, x0_scale=x0_scale,
+                     base=base, overrides=overrides)
+        if verify:
+            _verify(sc)
+        return sc
+
+    return _first_valid(candidate, max_attempts,
+                        f"random_plant_scenario(n_states={n}, n_controllers={Kc}, n_observers={N}, seed={seed})")
 
 
 # ---------------------------------------------------------------------- entry point
