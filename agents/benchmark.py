@@ -1,240 +1,474 @@
-"""RL versus the analytic controllers on the same seeded initial conditions.
+"""RL and hybrid agents versus the paper's controllers, over training seeds, with confidence intervals.
 
 ``dobs-envs benchmark --env tracking --budget quick --out runs/benchmark``
+(``--env all``: tracking, disturbance_rejection, hetero_mas, random_network)
 
-1. trains (or loads from ``<out>/models/<agent>/`` when a run with the same
-   budget, seed and env options is cached there) the RL agents of the budget:
-   centralised PPO and SAC on the Gymnasium env, parameter-shared PPO on the
-   PettingZoo env (``full`` adds TD3 and shared SAC);
-2. evaluates every policy -- the RL agents, the paper's separation controller
-   (:class:`baselines.policies.SeparationPolicy`), the full-state oracle, the
-   no-communication decentralised controller and zero input
-   (:mod:`baselines.references`) -- on the same ``K`` episodes, reset with seeds
-   ``eval_seed + k`` (recorded with each episode's ``x(0)`` in the JSON);
-3. prints the table (mean +- std over episodes) and writes ``results.csv``,
-   ``results.json`` and ``error_norms.png`` (tracking-error and estimation-error
-   norms over time, mean over episodes, per policy).
+1. **Train** every agent of the budget with several training seeds, in parallel
+   worker processes (``--workers``, one per core by default): pure RL (centralised PPO,
+   parameter-shared PPO; ``full`` adds SAC/TD3/shared SAC and PPO trained on the log
+   cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
+   behaviour cloning), each with the recipe of ``agents/hyperparams/<algo>.yaml``.
+   Each run records its learning curve (:mod:`agents.curves`). A finished run is
+   reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
+   so an interrupted benchmark resumes where it stopped.
+2. **Evaluate** every policy -- the trained agents, the paper's separation
+   controller, the full-state oracle, the no-communication decentralised controller
+   and zero input -- on the *same* ``K`` episodes of the task's own environment
+   (reset with seeds ``eval_seed + k``, recorded with each episode's ``x(0)``).
+3. **Aggregate** as rliable defines it (:mod:`agents.stats`): per (training seed,
+   episode) the cost ratio ``J_policy / J_paper`` on the same episode (< 1: cheaper
+   than the paper's controller), its interquartile mean (IQM) and stratified-bootstrap
+   95 % CI over training seeds; next to it the transient cost (first 2 s), the
+   steady-state error (RMS of the task error over the last 5 s) and the failure rate.
+4. **Write** ``<out>/<env>/results.{json,csv}``, ``error_norms.png``,
+   ``learning_curves.png`` and ``<out>/summary.{json,png}`` (every env's cost ratios
+   with their CIs).
 
-Budgets (environment steps per agent; wall times measured on a 2-core CPU):
+Budgets (environment steps per agent and seed; wall times on a 2-core CPU in the README):
 
-- ``tiny``: a few hundred steps and 20-step (1 s) episodes (tests);
-- ``quick``: the README's main job, ~10 minutes;
-- ``full``: longer training (hours).
+- ``tiny``: a few hundred steps, 20-step episodes (tests);
+- ``quick``: the README's main job (3 training seeds);
+- ``full``: 10 training seeds, longer training, every agent.
 """
 from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 
 import numpy as np
 
-from .config import gym_factory, parallel_factory
-from .evaluate import evaluate_policy, summarise
+from .config import ENVS, gym_factory, parallel_factory
+from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy, summarise
+from .stats import interval_estimate
 
-__all__ = ["BUDGETS", "run_benchmark", "format_table"]
+__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "format_table", "AgentSpec"]
 
-#: agent key -> (algorithm, multi_agent, label)
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """A benchmark agent: algorithm, parameter sharing, hybrid kind, label, extra training env options."""
+
+    algo: str
+    multi_agent: bool
+    hybrid: str | None
+    label: str
+    train_env_kwargs: tuple = ()
+
+    @property
+    def kind(self) -> str:
+        return "hybrid" if self.hybrid else "RL"
+
+
 AGENTS = {
-    "ppo": ("ppo", False, "PPO (centralised)"),
-    "sac": ("sac", False, "SAC (centralised)"),
-    "td3": ("td3", False, "TD3 (centralised)"),
-    "ppo_ma": ("ppo", True, "PPO (shared, per node)"),
-    "sac_ma": ("sac", True, "SAC (shared, per node)"),
+    "ppo": AgentSpec("ppo", False, None, "PPO (centralised)"),
+    "ppo_ma": AgentSpec("ppo", True, None, "PPO (shared, per node)"),
+    "sac": AgentSpec("sac", False, None, "SAC (centralised)"),
+    "td3": AgentSpec("td3", False, None, "TD3 (centralised)"),
+    "sac_ma": AgentSpec("sac", True, None, "SAC (shared, per node)"),
+    "ppo_log": AgentSpec("ppo", False, None, "PPO (centralised, log-cost training)", (("reward", "log"),)),
+    "ppo_res": AgentSpec("ppo", False, "residual", "residual PPO (centralised) [hybrid]"),
+    "ppo_res_ma": AgentSpec("ppo", True, "residual", "residual PPO (shared) [hybrid]"),
+    "ppo_bc": AgentSpec("ppo", False, "bc", "BC-warm-started PPO (centralised) [hybrid]"),
 }
 
 BUDGETS = {
     "tiny": {
-        "episodes": 2,
-        "env_kwargs": {"max_cycles": 20},
-        "agents": {"ppo": 256, "sac": 96, "ppo_ma": 128},
+        "episodes": 2, "seeds": 2, "env_kwargs": {"max_cycles": 20}, "curve_points": 2, "curve_episodes": 1,
+        "agents": {"ppo": 256, "ppo_ma": 128, "ppo_res": 128, "ppo_bc": 128},
         "hyperparams": {
-            "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1},
+            "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "bc": {"episodes": 1, "epochs": 1}},
             "sac": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
         },
     },
     "quick": {
-        "episodes": 10,
-        "env_kwargs": {},
-        "agents": {"ppo": 200_000, "sac": 10_000, "ppo_ma": 60_000},
+        "episodes": 10, "seeds": 3, "env_kwargs": {}, "curve_points": 6, "curve_episodes": 3,
+        "agents": {"ppo": 300_000, "ppo_ma": 150_000, "ppo_res": 150_000, "ppo_bc": 150_000},
         "hyperparams": {},
     },
     "full": {
-        "episodes": 20,
-        "env_kwargs": {},
-        "agents": {"ppo": 1_000_000, "sac": 100_000, "td3": 100_000, "ppo_ma": 400_000, "sac_ma": 100_000},
+        "episodes": 20, "seeds": 10, "env_kwargs": {}, "curve_points": 10, "curve_episodes": 5,
+        "agents": {"ppo": 1_000_000, "ppo_ma": 500_000, "ppo_log": 1_000_000, "sac": 100_000, "td3": 100_000,
+                   "sac_ma": 50_000, "ppo_res": 500_000, "ppo_res_ma": 300_000, "ppo_bc": 500_000},
         "hyperparams": {},
     },
 }
 
-COLUMNS = [
-    ("return", "return"),
-    ("final_tracking_error", "final err"),
-    ("rms_estimation_error", "RMS est err"),
-    ("control_effort", "effort"),
-]
+ANALYTIC = ("paper (separation)", "oracle (full state)", "decentralised (no comm.)", "zero input")
+PAPER = ANALYTIC[0]
+CURVE_SEED = 20_000  # learning-curve episodes use seeds CURVE_SEED + k (disjoint from the evaluation seeds)
 
 
-def _train_or_load(env, key, steps, seed, out, env_kwargs, hp_over, progress, tensorboard):
-    from .train import load_agent, train
+# ---------------------------------------------------------------------- one training run (worker process)
+def _run_signature(spec: dict) -> dict:
+    return {k: spec[k] for k in ("env", "agent", "seed", "steps", "hp", "env_kwargs", "eval_seeds", "curve_seeds",
+                                 "curve_every")}
 
-    algo, multi, _ = AGENTS[key]
-    path = os.path.join(out, "models", key)
-    cfg_path = os.path.join(path, "config.json")
-    if os.path.exists(cfg_path) and os.path.exists(os.path.join(path, "model.zip")):
-        with open(cfg_path) as fh:
-            cfg = json.load(fh)
-        if (cfg.get("timesteps") == steps and cfg.get("seed") == seed and cfg.get("env") == env
-                and cfg.get("env_kwargs") == dict(env_kwargs) and cfg.get("overrides", {}) == (hp_over or {})):
-            return load_agent(path), 0.0, True
+
+def _episode_payload(res) -> dict:
+    return {"episodes": [r.as_dict() for r in res],
+            "t": max(res, key=lambda r: len(r.t)).t.tolist() if res else [],
+            "tracking_error": [r.tracking_error.tolist() for r in res],
+            "estimation_error": [r.estimation_error.tolist() for r in res]}
+
+
+def _train_and_evaluate(spec: dict) -> dict:
+    """Train one (agent, seed) (or reuse a finished identical run) and evaluate it. Runs in a worker."""
+    from .curves import make_curve_callback
+    from .train import load_agent, set_threads, train
+
+    set_threads(spec["threads"])
+    path = spec["path"]
+    done_path = os.path.join(path, "result.json")
+    sig = _run_signature(spec)
+    if os.path.exists(done_path):
+        with open(done_path) as fh:
+            prev = json.load(fh)
+        if prev.get("signature") == sig:
+            prev["cached"] = True
+            return prev
+    a = AGENTS[spec["agent"]]
+    env, env_kwargs = spec["env"], spec["env_kwargs"]
+    steps = spec["steps"]
+    os.makedirs(path, exist_ok=True)
+    n_agents = len(parallel_factory(env, env_kwargs)().possible_agents) if a.multi_agent else 1
+    curve = make_curve_callback(env, env_kwargs, spec["curve_seeds"], spec["curve_every"], n_agents=n_agents,
+                                path=os.path.join(path, "curve.json"))
+    hp = dict(spec["hp"])
+    if a.train_env_kwargs:
+        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
     t0 = time.perf_counter()
-    res = train(env, algo, multi_agent=multi, timesteps=steps, seed=seed, out=path, progress=progress,
-                hyperparams=hp_over or None, env_kwargs=env_kwargs, tensorboard=tensorboard)
-    # remember the overrides so a cache hit needs the same budget
-    cfg = dict(res.config, overrides=hp_over or {})
-    with open(cfg_path, "w") as fh:
-        json.dump(cfg, fh, indent=2, default=str)
-    return load_agent(path), time.perf_counter() - t0, False
+    train(env, a.algo, multi_agent=a.multi_agent, timesteps=steps, seed=spec["seed"], out=path, progress=False,
+          hyperparams=hp or None, env_kwargs=env_kwargs, hybrid=a.hybrid, callbacks=[curve], checkpoint_freq=0)
+    train_s = time.perf_counter() - t0
+    agent = load_agent(path)
+    eval_env = (parallel_factory if a.multi_agent else gym_factory)(env, env_kwargs)()
+    res = evaluate_policy(eval_env, agent.policy_for(eval_env), len(spec["eval_seeds"]), spec["eval_seeds"][0],
+                          parallel=a.multi_agent)
+    eval_env.close()
+    out = {"signature": sig, "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
+           "curve": curve.points, **_episode_payload(res), "cached": False}
+    with open(done_path + ".tmp", "w") as fh:
+        json.dump(out, fh)
+    os.replace(done_path + ".tmp", done_path)  # atomic: a half-written result is never taken as finished
+    return out
 
 
-def _analytic(penv):
+# ---------------------------------------------------------------------- analytic controllers (main process)
+def _analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
     from baselines.policies import SeparationPolicy
     from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
 
-    return [
-        ("paper (separation)", SeparationPolicy(penv)),
-        ("oracle (full state)", OraclePolicy(penv)),
-        ("decentralised (no comm.)", DecentralizedPolicy(penv)),
-        ("zero input", ZeroInputPolicy(penv)),
-    ]
+    penv = parallel_factory(env, env_kwargs)()
+    out = {}
+    for label, pol in zip(ANALYTIC, (SeparationPolicy(penv), OraclePolicy(penv), DecentralizedPolicy(penv),
+                                     ZeroInputPolicy(penv))):
+        out[label] = _episode_payload(evaluate_policy(penv, pol, episodes, eval_seed, parallel=True))
+    penv.close()
+    return out
+
+
+# ---------------------------------------------------------------------- aggregation
+def _matrix(runs: list[dict], key: str) -> np.ndarray:
+    return np.array([[e[key] for e in r["episodes"]] for r in runs], dtype=np.float64)
+
+
+def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray) -> dict:
+    """Row of the results table from ``runs`` (one payload per training seed)."""
+    cost = _matrix(runs, "cost")
+    ratio = cost / paper_cost[None, :]
+    row = {"policy": label, "kind": kind, "runs": len(runs), "episodes": cost.shape[1]}
+    for key, mat in (("cost_ratio", ratio), ("transient_cost", _matrix(runs, "transient_cost")),
+                     ("steady_state_error", _matrix(runs, "steady_state_error")),
+                     ("final_tracking_error", _matrix(runs, "final_tracking_error"))):
+        est = interval_estimate(mat)
+        row[f"{key}_iqm"], row[f"{key}_ci_low"], row[f"{key}_ci_high"] = est["iqm"], est["ci_low"], est["ci_high"]
+    row["failure_rate"] = float(np.mean(_matrix(runs, "failed")))
+    flat = [e for r in runs for e in r["episodes"]]
+    summ = summarise_dicts(flat)
+    row.update(summ)
+    return row
+
+
+def summarise_dicts(episodes: list[dict]) -> dict:
+    """Mean and std over episodes of the per-episode metrics (as :func:`agents.evaluate.summarise`)."""
+    out = {}
+    for key in ("return", "cost", "transient_cost", "steady_state_error", "final_tracking_error",
+                "rms_estimation_error", "control_effort", "length"):
+        a = np.array([e[key] for e in episodes], dtype=np.float64)
+        out[f"{key}_mean"], out[f"{key}_std"] = float(a.mean()), float(a.std())
+    return out
+
+
+def _curve_stats(runs: list[dict]) -> dict | None:
+    """IQM and CI of the learning curves over training seeds, at the points all runs share."""
+    curves = [r.get("curve") or [] for r in runs]
+    if not curves or not all(curves):
+        return None
+    n = min(len(c) for c in curves)
+    steps, iq, lo, hi = [], [], [], []
+    for i in range(n):
+        mat = np.array([c[i]["cost_ratio"] for c in curves])
+        est = interval_estimate(mat, reps=5_000)
+        steps.append(int(np.median([c[i]["env_steps"] for c in curves])))
+        iq.append(est["iqm"]); lo.append(est["ci_low"]); hi.append(est["ci_high"])
+    return {"env_steps": steps, "iqm": iq, "ci_low": lo, "ci_high": hi}
+
+
+def _overlaps(rows: list[dict]) -> list[list[str]]:
+    """Pairs of policies whose cost-ratio CIs overlap."""
+    out = []
+    for i, a in enumerate(rows):
+        for b in rows[i + 1:]:
+            if a["cost_ratio_ci_low"] <= b["cost_ratio_ci_high"] and b["cost_ratio_ci_low"] <= a["cost_ratio_ci_high"]:
+                out.append([a["policy"], b["policy"]])
+    return out
 
 
 def format_table(rows: list[dict]) -> str:
-    head = f"{'policy':26s} | " + " | ".join(f"{lab:>21s}" for _, lab in COLUMNS) + " | fail"
+    """Text table: cost ratio IQM [95 % CI], transient cost, steady-state error, failures."""
+    head = (f"{'policy':44s} | {'kind':8s} | runs | {'J / J_paper: IQM [95% CI]':30s} | "
+            f"{f'transient J (<{TRANSIENT_S:g} s)':>18s} | {f'steady err (last {STEADY_S:g} s)':>22s} | fail")
     lines = [head, "-" * len(head)]
     for r in rows:
-        cells = []
-        for key, _ in COLUMNS:
-            m, s = r[f"{key}_mean"], r[f"{key}_std"]
-            cells.append(f"{m:>10.4g} +- {s:<7.3g}")
-        lines.append(f"{r['policy']:26s} | " + " | ".join(cells) + f" | {r['failure_rate']:4.0%}")
+        ci = f"{r['cost_ratio_iqm']:.3g} [{r['cost_ratio_ci_low']:.3g}, {r['cost_ratio_ci_high']:.3g}]"
+        lines.append(f"{r['policy']:44s} | {r['kind']:8s} | {r['runs']:4d} | {ci:30s} | "
+                     f"{r['transient_cost_iqm']:>18.4g} | {r['steady_state_error_iqm']:>22.4g} | "
+                     f"{r['failure_rate']:4.0%}")
     return "\n".join(lines)
 
 
-def _plot(curves: dict, path: str, title: str) -> None:
+# ---------------------------------------------------------------------- figures
+def _plt():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _plot_error_norms(payloads: dict, path: str, title: str, task_label: str) -> None:
+    plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
-    for name, (t, te, ee) in curves.items():
-        axes[0].plot(t, te, lw=1.2, label=name)
-        axes[1].plot(t, ee, lw=1.2, label=name)
-    axes[0].set_ylabel(r"mean $\|x - x_r\|$ over episodes")
+    for name, runs in payloads.items():
+        te = [np.asarray(x) for r in runs for x in r["tracking_error"]]
+        ee = [np.asarray(x) for r in runs for x in r["estimation_error"]]
+        L = max(len(x) for x in te)
+        t = max((np.asarray(r["t"]) for r in runs), key=len)
+
+        def pad(a):
+            return np.concatenate([a, np.full(L - len(a), a[-1])]) if len(a) < L else a
+        axes[0].plot(t, np.mean([pad(x) for x in te], axis=0), lw=1.2, label=name)
+        axes[1].plot(t, np.mean([pad(x) for x in ee], axis=0), lw=1.2, label=name)
+    axes[0].set_ylabel(f"mean {task_label} over episodes")
     axes[1].set_ylabel(r"mean RMS$_i$ $\|\hat x_i - x\|$ (env observers)")
     for ax in axes:
         ax.set_yscale("log")
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=6)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def _mean_curve(results):
-    """Mean over episodes; episodes that ended early are held at their last value."""
-    L = max(len(r.t) for r in results)
-    t = max(results, key=lambda r: len(r.t)).t
-    def pad(a):
-        return np.concatenate([a, np.full(L - len(a), a[-1])]) if len(a) < L else a
-    te = np.mean([pad(r.tracking_error) for r in results], axis=0)
-    ee = np.mean([pad(r.estimation_error) for r in results], axis=0)
-    return t, te, ee
+def _plot_curves(curves: dict, path: str, title: str) -> None:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name, c in curves.items():
+        if c is None:
+            continue
+        line, = ax.plot(c["env_steps"], c["iqm"], marker="o", ms=3, lw=1.3, label=name)
+        ax.fill_between(c["env_steps"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=0.2)
+    ax.axhline(1.0, color="k", lw=1, ls="--", label="paper controller")
+    ax.set_yscale("log")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel(r"$J / J_{paper}$ (IQM, 95% CI over seeds)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_summary(per_env: dict, path: str, title: str) -> None:
+    plt = _plt()
+    envs = list(per_env)
+    from matplotlib.ticker import NullFormatter
+
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs) + 3.0, 0.42 * max(len(r) for r in per_env.values())
+                                                    + 1.8), squeeze=False, sharey=True)
+    for ax, env in zip(axes[0], envs):
+        rows = per_env[env]
+        y = np.arange(len(rows))[::-1]
+        for yi, r in zip(y, rows):
+            color = {"RL": "tab:blue", "hybrid": "tab:green"}.get(r["kind"], "tab:gray")
+            lo, hi, m = r["cost_ratio_ci_low"], r["cost_ratio_ci_high"], r["cost_ratio_iqm"]
+            ax.plot([lo, hi], [yi, yi], color=color, lw=6, alpha=0.45, solid_capstyle="butt")
+            ax.plot([m], [yi], "|", color="k", ms=12)
+        ax.axvline(1.0, color="k", ls="--", lw=1)
+        ax.set_yticks(y, [r["policy"] for r in rows], fontsize=7)
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel(r"$J / J_{paper}$ (IQM, 95% CI)")
+        ax.set_title(env)
+        ax.grid(alpha=0.3, axis="x", which="both")
+    fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI over training seeds)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------- driver
+def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None) -> tuple[dict, int]:
+    B = BUDGETS[budget]
+    plan = dict(B["agents"])
+    if agents is not None:
+        unknown = sorted(set(agents) - set(AGENTS))
+        if unknown:
+            raise ValueError(f"unknown agents {unknown}; choose from {sorted(AGENTS)}")
+        default = max(B["agents"].values())
+        plan = {k: plan.get(k, default) for k in agents}
+    if timesteps is not None:
+        if timesteps < 1:
+            raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+        plan = {k: int(timesteps) for k in plan}
+    n_seeds = int(seeds if seeds is not None else B["seeds"])
+    if n_seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    return plan, n_seeds
 
 
 def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
                   eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
-                  agents: list[str] | None = None, progress: bool = True, tensorboard: str | None = None,
-                  threads: int | None = 1) -> dict:
-    """Run the benchmark (see module doc); returns the JSON document it writes."""
-    from .train import set_threads
+                  agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
+                  progress: bool = True, threads: int | None = 1) -> dict:
+    """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
 
+    Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's);
+    ``workers`` processes train in parallel (default: the number of CPU cores, at most 2 x
+    ... the jobs).
+    """
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
+    env_names = list(ENVS) if env == "all" else [env]
+    for e in env_names:
+        if e not in ENVS:
+            raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
     t_start = time.perf_counter()
-    set_threads(threads)
     B = BUDGETS[budget]
+    plan, n_seeds = _plan(budget, agents, timesteps, seeds)
     episodes = int(episodes or B["episodes"])
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    eval_seeds = [eval_seed + k for k in range(episodes)]
+    curve_seeds = [CURVE_SEED + k for k in range(B["curve_episodes"])]
     env_kwargs = dict(B["env_kwargs"])
-    plan = dict(B["agents"])
-    if agents is not None:
-        unknown = set(agents) - set(AGENTS)
-        if unknown:
-            raise ValueError(f"unknown agents {sorted(unknown)}; choose from {sorted(AGENTS)}")
-        plan = {k: plan.get(k, timesteps or B["agents"].get("ppo", 10_000)) for k in agents}
-    if timesteps is not None:
-        plan = {k: int(timesteps) for k in plan}
     os.makedirs(out, exist_ok=True)
 
-    timings, trained = {}, {}
-    for key, steps in plan.items():
-        algo = AGENTS[key][0]
-        hp = dict(B["hyperparams"].get(algo, {}))
-        agent, secs, cached = _train_or_load(env, key, steps, seed, out, env_kwargs, hp, progress, tensorboard)
-        trained[key] = agent
-        timings[f"train_{key}"] = secs
-        if progress:
-            print(f"{AGENTS[key][2]}: {'loaded cached model' if cached else f'trained {steps} steps in {secs:.0f} s'}")
+    specs = []
+    for e in env_names:
+        for key, steps in plan.items():
+            a = AGENTS[key]
+            hp = dict(B["hyperparams"].get(a.algo, {}))
+            for s in range(seed, seed + n_seeds):
+                specs.append({"env": e, "agent": key, "seed": s, "steps": int(steps), "hp": hp,
+                              "env_kwargs": env_kwargs, "eval_seeds": eval_seeds, "curve_seeds": curve_seeds,
+                              "curve_every": max(1, int(steps) // B["curve_points"]), "threads": threads,
+                              "path": os.path.join(out, "models", e, budget, key, f"s{s}")})
+    # longest jobs first: better packing on the workers
+    specs.sort(key=lambda sp: -sp["steps"] * (5 if AGENTS[sp["agent"]].multi_agent else 1))
+    n_workers = int(workers or min(os.cpu_count() or 1, 8))
+    results: dict[tuple, dict] = {}
+    t_train = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
 
-    t_eval = time.perf_counter()
-    penv = parallel_factory(env, env_kwargs)()
-    genv = gym_factory(env, env_kwargs)()
-    rows, curves, episodes_json = [], {}, {}
-    policies = []
-    for key, agent in trained.items():
-        label = AGENTS[key][2]
-        if agent.multi_agent:
-            policies.append((label, agent.parallel_policy(penv), penv, True))
-        else:
-            policies.append((label, agent.central_policy(), genv, False))
-    for label, pol in _analytic(penv):
-        policies.append((label, pol, penv, True))
-    for label, pol, e, parallel in policies:
-        res = evaluate_policy(e, pol, episodes, eval_seed, parallel=parallel, progress=progress, desc=label)
-        summ = {"policy": label, **summarise(res)}
-        rows.append(summ)
-        curves[label] = _mean_curve(res)
-        episodes_json[label] = [r.as_dict() for r in res]
-    penv.close()
-    genv.close()
-    timings["evaluate"] = time.perf_counter() - t_eval
-    timings["total"] = time.perf_counter() - t_start
+        bar = tqdm(total=len(specs), desc=f"train+evaluate ({n_workers} workers)", unit="run")
+    if n_workers > 1 and len(specs) > 1:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
+            futs = {pool.submit(_train_and_evaluate, sp): sp for sp in specs}
+            analytic = {e: _analytic_results(e, env_kwargs, eval_seed, episodes) for e in env_names}
+            for f in as_completed(futs):
+                sp = futs[f]
+                results[(sp["env"], sp["agent"], sp["seed"])] = f.result()
+                if bar is not None:
+                    bar.update(1)
+    else:
+        analytic = {e: _analytic_results(e, env_kwargs, eval_seed, episodes) for e in env_names}
+        for sp in specs:
+            results[(sp["env"], sp["agent"], sp["seed"])] = _train_and_evaluate(sp)
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+    train_wall = time.perf_counter() - t_train
 
-    table = format_table(rows)
-    doc = {
-        "env": env, "budget": budget, "seed": seed, "eval_seeds": [eval_seed + k for k in range(episodes)],
-        "episodes": episodes, "env_kwargs": env_kwargs, "train_steps": plan, "timings_s": timings,
-        "metrics_doc": {
-            "return": "sum of the team reward -(e'Qe + u'Ru) * period",
-            "final_tracking_error": "||x - x_r|| (||x|| without reference) at the last step",
-            "rms_estimation_error": "RMS over time and nodes of ||xhat_i - x|| of the env's distributed observer",
-            "control_effort": "int ||u||^2 dt of the applied (clipped) input",
-            "failure_rate": "fraction of episodes terminated early (state bound exceeded / non-finite)",
-        },
-        "results": rows, "episodes_detail": episodes_json, "table": table,
-    }
-    with open(os.path.join(out, "results.json"), "w") as fh:
-        json.dump(doc, fh, indent=2)
-    keys = ["policy", "episodes"] + [f"{k}_{s}" for k, _ in COLUMNS + [("length", "")] for s in ("mean", "std")] + [
-        "failure_rate", "rms_policy_estimation_error_mean"]
-    with open(os.path.join(out, "results.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow(r)
-    _plot(curves, os.path.join(out, "error_norms.png"), f"{env}: {budget} budget, {episodes} episodes")
-    return doc
+    per_env_rows, docs = {}, {}
+    for e in env_names:
+        edir = os.path.join(out, e)
+        os.makedirs(edir, exist_ok=True)
+        paper = analytic[e][PAPER]
+        paper_cost = np.array([ep["cost"] for ep in paper["episodes"]])
+        payloads, rows, curves, detail, train_s = {}, [], {}, {}, {}
+        for key in plan:
+            a = AGENTS[key]
+            runs = [results[(e, key, s)] for s in range(seed, seed + n_seeds)]
+            payloads[a.label] = runs
+            rows.append(_aggregate(a.label, a.kind, runs, paper_cost))
+            curves[a.label] = _curve_stats(runs)
+            detail[a.label] = {f"s{r['seed']}": r["episodes"] for r in runs}
+            train_s[key] = [0.0 if r.get("cached") else r["train_seconds"] for r in runs]
+        for label in ANALYTIC:
+            payloads[label] = [analytic[e][label]]
+            rows.append(_aggregate(label, "analytic", [analytic[e][label]], paper_cost))
+            detail[label] = {"deterministic": analytic[e][label]["episodes"]}
+        table = format_table(rows)
+        task_label = r"disagreement $\|p - \bar p 1\|$" if e == "hetero_mas" else r"task error $\|x - x_r\|$ or $\|x\|$"
+        _plot_error_norms(payloads, os.path.join(edir, "error_norms.png"), f"{e}: {budget} budget", task_label)
+        _plot_curves(curves, os.path.join(edir, "learning_curves.png"), f"{e}: learning curves ({budget})")
+        doc = {
+            "env": e, "budget": budget, "training_seeds": list(range(seed, seed + n_seeds)), "eval_seeds": eval_seeds,
+            "curve_seeds": curve_seeds, "episodes": episodes, "env_kwargs": env_kwargs, "train_steps": plan,
+            "train_seconds": train_s, "paper_cost": paper_cost.tolist(),
+            "statistics": ("rliable definitions: IQM = 25%-trimmed mean over (training seed, episode); 95% CI by "
+                           "stratified bootstrap over training seeds within each episode (50000 replicates, "
+                           "percentile); analytic controllers are deterministic (one run: the CI is the point)"),
+            "metrics_doc": {
+                "cost_ratio": "J_policy / J_paper on the same episode; J = -return (LQ cost incl. termination penalty)",
+                "transient_cost": f"cost incurred in the first {TRANSIENT_S:g} s",
+                "steady_state_error": f"RMS of the task error over the last {STEADY_S:g} s",
+                "failure_rate": "fraction of episodes terminated early (state bound exceeded / non-finite)",
+            },
+            "results": rows, "ci_overlaps": _overlaps(rows), "learning_curves": curves, "episodes_detail": detail,
+            "table": table,
+        }
+        with open(os.path.join(edir, "results.json"), "w") as fh:
+            json.dump(doc, fh, indent=1)
+        cols = ["policy", "kind", "runs", "episodes"] + [f"{k}_{s}" for k in (
+            "cost_ratio", "transient_cost", "steady_state_error", "final_tracking_error") for s in ("iqm", "ci_low", "ci_high")] \
+            + ["failure_rate", "return_mean", "return_std", "control_effort_mean", "rms_estimation_error_mean"]
+        with open(os.path.join(edir, "results.csv"), "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow(r)
+        per_env_rows[e], docs[e] = rows, doc
+    _plot_summary(per_env_rows, os.path.join(out, "summary.png"), f"{budget} budget: cost relative to the paper's controller")
+    summary = {"budget": budget, "envs": env_names, "training_seeds": list(range(seed, seed + n_seeds)),
+               "eval_seeds": eval_seeds, "workers": n_workers,
+               "timings_s": {"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start},
+               "tables": {e: docs[e]["table"] for e in env_names},
+               "results": {e: per_env_rows[e] for e in env_names}}
+    with open(os.path.join(out, "summary.json"), "w") as fh:
+        json.dump(summary, fh, indent=1)
+    return summary

@@ -1,11 +1,12 @@
 """``dobs-envs train | evaluate | benchmark`` (registered by :mod:`dobs_envs.cli`)."""
 from __future__ import annotations
 
+import argparse
 import json
 import time
 
 from .benchmark import AGENTS, BUDGETS
-from .config import ALGOS
+from .config import ALGOS, ENVS
 
 __all__ = ["add_parser"]
 
@@ -19,6 +20,9 @@ def add_parser(sub) -> None:
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
     p.add_argument("--timesteps", type=int, default=None,
                    help="environment steps (multi-agent: SB3 sees one sample per agent); default from the YAML")
+    p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
+                   help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
+                        "by behaviour cloning of the paper's controller (centralised PPO)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
@@ -36,18 +40,31 @@ def add_parser(sub) -> None:
     p.add_argument("--json", default=None, help="also write the summary to this file")
     p.set_defaults(func=_evaluate)
 
-    p = sub.add_parser("benchmark", help="RL agents vs the paper's controller, oracle, decentralised and zero input")
-    p.add_argument("--env", default="tracking")
+    p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "
+                                         "oracle, decentralised and zero input; IQM and bootstrap CIs")
+    p.add_argument("--env", default="tracking", choices=sorted(ENVS) + ["all"])
     p.add_argument("--budget", choices=sorted(BUDGETS), default="quick")
     p.add_argument("--out", default="runs/benchmark")
-    p.add_argument("--seed", type=int, default=0, help="training seed")
+    p.add_argument("--seed", type=int, default=0, help="first training seed (seeds seed, seed+1, ...)")
+    p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="parallel training processes (default: the number of CPU cores)")
     p.add_argument("--eval-seed", type=int, default=10_000, help="episode k of every policy is reset with eval_seed + k")
-    p.add_argument("--episodes", type=int, default=None, help="evaluation episodes (default: the budget's)")
-    p.add_argument("--timesteps", type=int, default=None, help="override every agent's training budget")
+    p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
+    p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
-    p.add_argument("--tensorboard", default=None, metavar="DIR")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_benchmark)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
 
 
 def _train(args) -> int:
@@ -56,7 +73,8 @@ def _train(args) -> int:
     hp = json.loads(args.hyperparams) if args.hyperparams else None
     res = train(args.env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
                 out=args.out, tensorboard=args.tensorboard, progress=not args.no_progress,
-                checkpoint_freq=args.checkpoint_freq, hyperparams=hp, threads=args.threads, verbose=args.verbose)
+                checkpoint_freq=args.checkpoint_freq, hyperparams=hp, threads=args.threads, verbose=args.verbose,
+                hybrid=args.hybrid)
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
@@ -80,12 +98,14 @@ def _benchmark(args) -> int:
 
     t0 = time.perf_counter()
     agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
-    doc = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
-                        episodes=args.episodes, timesteps=args.timesteps, agents=agents,
-                        progress=not args.no_progress, tensorboard=args.tensorboard)
-    print()
-    print(f"{args.env}, budget {args.budget}: {doc['episodes']} episodes, seeds {doc['eval_seeds'][0]}.."
-          f"{doc['eval_seeds'][-1]} (same for every policy); mean +- std")
-    print(doc["table"])
-    print(f"wrote {args.out}/results.csv, results.json, error_norms.png; wall time {time.perf_counter() - t0:.0f} s")
+    summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
+                         episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
+                         workers=args.workers, progress=not args.no_progress)
+    for env, table in summ["tables"].items():
+        print()
+        print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}, evaluation episodes "
+              f"{summ['eval_seeds'][0]}..{summ['eval_seeds'][-1]} (the same for every policy)")
+        print(table)
+    print(f"\nwrote {args.out}/summary.json, summary.png and <env>/results.{{csv,json}}, error_norms.png, "
+          f"learning_curves.png; wall time {time.perf_counter() - t0:.0f} s")
     return 0

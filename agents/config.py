@@ -12,7 +12,9 @@ Hyperparameter files
 --------------------
 One YAML file per algorithm, keyed by environment name. Lookup (later entries
 override earlier ones): ``default``, then ``default-ma`` (multi-agent only), then
-``<env>``, then ``<env>-ma`` (multi-agent only). Keys besides the algorithm's
+``<env>``, then ``<env>-ma`` (multi-agent only); hybrids (``variant``) then add
+``default-<variant>``, ``<env>-<variant>`` and ``<env>-ma-<variant>`` (multi-agent).
+Keys besides the algorithm's
 constructor arguments:
 
 - ``n_envs``: environment copies (multi-agent: copies; each has one slot per agent)
@@ -21,7 +23,10 @@ constructor arguments:
 - ``normalize``: ``false`` or a dict of ``VecNormalize`` arguments
   (``norm_obs``, ``norm_reward``, ``clip_obs``, ...; ``gamma`` defaults to the algorithm's)
 - ``agent_id``: (multi-agent) append a one-hot agent id to observations
-- ``env_kwargs``: keyword arguments for the environment constructor
+- ``env_kwargs``: training-only environment options of the recipe (e.g. a tighter
+  ``state_bound``); evaluation always uses the task's own environment
+- ``residual_scale`` (``-residual`` variants): residual authority, fraction of the action bound
+- ``bc`` (``-bc`` variants): ``{episodes, noise, epochs, lr}`` of the warm start
 - ``policy_kwargs.activation_fn``: a name (``tanh``, ``relu``, ``elu``)
 - ``action_noise`` (TD3/SAC): ``{type: normal, sigma: 0.1}``
 """
@@ -124,12 +129,15 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
-def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, overrides: dict | None = None) -> dict:
+def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, overrides: dict | None = None,
+                     variant: str | None = None) -> dict:
     """Merged hyperparameters of ``algo`` on ``env`` (see module doc for the lookup)."""
     algo = algo.lower()
     table = _load_yaml(algo)
     name = env_key(env) if isinstance(env, str) else "default"
     keys = ["default"] + (["default-ma"] if multi_agent else []) + [name] + ([f"{name}-ma"] if multi_agent else [])
+    if variant:
+        keys += [f"default-{variant}", f"{name}-{variant}"] + ([f"{name}-ma-{variant}"] if multi_agent else [])
     hp: dict = {}
     for k in keys:
         if k in table:

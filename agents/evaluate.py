@@ -15,6 +15,10 @@ Per-episode metrics (read from the underlying simulation, identical for all poli
 - ``rms_estimation_error``: RMS over time and observer nodes of ``||xhat_i - x||`` of the
   environment's distributed observer (it runs whatever the policy does);
 - ``control_effort``: ``int ||u||^2 dt`` of the applied (clipped) input;
+- ``cost``: ``-return``, the episode's LQ cost J (with the termination penalty);
+- ``transient_cost``: the part of ``cost`` incurred in the first ``TRANSIENT_S`` (2 s);
+- ``steady_state_error``: RMS of the task error over the last ``STEADY_S`` (5 s) of the
+  episode;
 - ``failed``: the episode terminated early (state bound exceeded or non-finite state);
 - ``rms_policy_estimation_error`` (policies exposing ``estimates``, e.g. the
   decentralised baseline): RMS error of the estimates the policy acted on.
@@ -29,7 +33,12 @@ import numpy as np
 
 __all__ = ["EpisodeResult", "evaluate_policy", "summarise", "METRICS"]
 
-METRICS = ("return", "final_tracking_error", "rms_estimation_error", "control_effort", "failed")
+METRICS = ("return", "cost", "transient_cost", "steady_state_error", "final_tracking_error",
+           "rms_estimation_error", "control_effort", "failed")
+
+#: window of the transient cost (first seconds) and of the steady-state error (last seconds)
+TRANSIENT_S = 2.0
+STEADY_S = 5.0
 
 
 def _base(env):
@@ -48,13 +57,20 @@ class EpisodeResult:
     rms_estimation_error: float
     control_effort: float
     rms_policy_estimation_error: float | None
+    transient_cost: float
+    steady_state_error: float
     x0: np.ndarray
     t: np.ndarray = field(repr=False)
     tracking_error: np.ndarray = field(repr=False)
     estimation_error: np.ndarray = field(repr=False)  # mean over nodes of ||xhat_i - x|| per step
 
+    @property
+    def cost(self) -> float:
+        return -self.ret
+
     def as_dict(self) -> dict:
-        return {"seed": self.seed, "return": self.ret, "length": self.length, "failed": self.failed,
+        return {"seed": self.seed, "return": self.ret, "cost": self.cost, "transient_cost": self.transient_cost,
+                "steady_state_error": self.steady_state_error, "length": self.length, "failed": self.failed,
                 "final_tracking_error": self.final_tracking_error, "rms_estimation_error": self.rms_estimation_error,
                 "control_effort": self.control_effort, "rms_policy_estimation_error": self.rms_policy_estimation_error,
                 "x0": [float(v) for v in self.x0]}
@@ -62,10 +78,6 @@ class EpisodeResult:
 
 def _task_error(base) -> float:
     return float(base.task_error())
-
-
-def _clipped(u, space):
-    return np.clip(np.asarray(u, dtype=np.float64).reshape(space.shape), space.low, space.high)
 
 
 def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeResult:
@@ -80,6 +92,7 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
     x0 = np.asarray(base.state(), dtype=np.float64)[xs].copy()
     ts, te, ee = [0.0], [_task_error(base)], [float(np.mean(base.estimation_errors() ** 2))]
     ret, effort, failed, n = 0.0, 0.0, False, 0
+    rewards = []
     pol_err2, pol_cnt = 0.0, 0
     agent0 = base.possible_agents[0]
     has_est = hasattr(policy, "estimates")
@@ -91,19 +104,18 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
                 pol_err2 += float(np.sum((np.asarray(v) - x) ** 2))
                 pol_cnt += 1
         if parallel:
-            u2 = sum(float(np.sum(_clipped(act[a], base.action_space(a)) ** 2)) for a in act)
             obs, rew, term, trunc, _ = env.step(act)
             r = float(rew[agent0])
             done_term = any(term.values())
             done = done_term or any(trunc.values()) or not base.agents
         else:
-            u2 = float(np.sum(_clipped(act, env.action_space) ** 2))
             obs, r, done_term, truncated, _ = env.step(act)
             r = float(r)
             done = done_term or truncated
         n += 1
         ret += r
-        effort += u2 * period
+        rewards.append(r)
+        effort += float(np.sum(base.applied_input ** 2)) * period
         ts.append(n * period)
         te.append(_task_error(base))
         ee.append(float(np.mean(base.estimation_errors() ** 2)))
@@ -111,10 +123,15 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
             failed = bool(done_term)
             break
     ee_arr = np.sqrt(np.asarray(ee))
+    n_tr = max(1, int(round(TRANSIENT_S / period)))
+    n_ss = max(1, int(round(STEADY_S / period)))
+    te_arr = np.asarray(te)
     return EpisodeResult(
         seed=int(seed), ret=ret, length=n, failed=failed, final_tracking_error=te[-1],
         rms_estimation_error=float(math.sqrt(np.mean(ee))), control_effort=effort,
         rms_policy_estimation_error=float(math.sqrt(pol_err2 / pol_cnt)) if pol_cnt else None,
+        transient_cost=-float(np.sum(rewards[:n_tr])),
+        steady_state_error=float(np.sqrt(np.mean(te_arr[-n_ss:] ** 2))),
         x0=x0, t=np.asarray(ts), tracking_error=np.asarray(te), estimation_error=ee_arr,
     )
 
@@ -137,7 +154,8 @@ def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
         return float(np.mean(a)), float(np.std(a))
 
     out: dict[str, Any] = {"episodes": len(results), "seeds": [r.seed for r in results]}
-    for key, attr in (("return", "ret"), ("final_tracking_error", "final_tracking_error"),
+    for key, attr in (("return", "ret"), ("cost", "cost"), ("transient_cost", "transient_cost"),
+                      ("steady_state_error", "steady_state_error"), ("final_tracking_error", "final_tracking_error"),
                       ("rms_estimation_error", "rms_estimation_error"), ("control_effort", "control_effort"),
                       ("length", "length")):
         out[f"{key}_mean"], out[f"{key}_std"] = ms([getattr(r, attr) for r in results])
@@ -154,12 +172,9 @@ def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True
 
     agent = load_agent(path)
     cfg = agent.config
-    if agent.multi_agent:
-        env = parallel_factory(cfg["env"], cfg.get("env_kwargs"))()
-        pol = agent.parallel_policy(env)
-    else:
-        env = gym_factory(cfg["env"], cfg.get("env_kwargs"))()
-        pol = agent.central_policy()
+    # the task's own env (a recipe's training-only options, cfg["train_env_kwargs"], do not apply)
+    env = (parallel_factory if agent.multi_agent else gym_factory)(cfg["env"], cfg.get("env_kwargs"))()
+    pol = agent.policy_for(env)
     try:
         _base(env)
     except TypeError:

@@ -30,7 +30,7 @@ __all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "TqdmCallback
 
 _ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
 _EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise",
-               "normalize_actions")
+               "normalize_actions", "residual_scale", "bc")
 
 
 def set_threads(threads: int | None = 1) -> None:
@@ -52,6 +52,17 @@ def _algo_class(algo: str):
         raise ValueError(f"unknown algorithm {algo!r}; choose from {sorted(table)}") from None
 
 
+def _schedule(value):
+    """rl-zoo3's schedule strings: ``"lin_3e-4"`` is a linear decay from 3e-4 to 0 over training."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        try:
+            v0 = float(value[4:])
+        except ValueError:
+            raise ValueError(f"schedule {value!r} must be 'lin_<number>', e.g. 'lin_3e-4'") from None
+        return lambda progress_remaining: progress_remaining * v0
+    return value
+
+
 def _policy_kwargs(pk: dict | None) -> dict:
     import torch.nn as nn
 
@@ -66,19 +77,25 @@ def _policy_kwargs(pk: dict | None) -> dict:
 
 
 def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int | None = None,
-                  env_kwargs: dict | None = None, agent_id: bool = False, normalize_actions: bool = False):
+                  env_kwargs: dict | None = None, agent_id: bool = False, normalize_actions: bool = False,
+                  residual_scale: float | None = None):
     """Monitored VecEnv for training (not normalised).
 
     ``env`` is a name (see :mod:`agents.config`) or a constructor. Centralised envs
     use ``DummyVecEnv`` + ``Monitor``; multi-agent ones :class:`ParallelVecEnv` +
     ``VecMonitor``. ``normalize_actions``: the agent acts in ``[-1, 1]`` (Gymnasium's
-    ``RescaleAction`` / the adapter's ``rescale_actions``).
+    ``RescaleAction`` / the adapter's ``rescale_actions``). ``residual_scale``: the
+    agent's action is a residual correction (:mod:`agents.hybrid`), already in ``[-1, 1]``.
     """
+    from .hybrid import residual_factory
+
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     if multi_agent:
         fac = parallel_factory(env, env_kwargs)
+        if residual_scale is not None:
+            fac, normalize_actions = residual_factory(fac, residual_scale, parallel=True), False
         venv = VecMonitor(ParallelVecEnv([fac for _ in range(n_envs)], agent_id=agent_id,
                                          rescale_actions=normalize_actions))
         if seed is not None:
@@ -88,6 +105,8 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
         fac = lambda: env(**(env_kwargs or {}))  # noqa: E731
     else:
         fac = gym_factory(env, env_kwargs)
+    if residual_scale is not None:
+        fac, normalize_actions = residual_factory(fac, residual_scale, parallel=False), False
     if normalize_actions:
         from gymnasium.wrappers import RescaleAction
 
@@ -136,7 +155,8 @@ def default_run_dir(env: str, algo: str, multi_agent: bool, seed: int) -> str:
 def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int | None = None, seed: int = 0,
           out: str | None = None, tensorboard: str | None = None, progress: bool = True,
           checkpoint_freq: int | None = None, hyperparams: dict | None = None, env_kwargs: dict | None = None,
-          threads: int | None = 1, verbose: int = 0, env_name: str | None = None) -> TrainResult:
+          threads: int | None = 1, verbose: int = 0, env_name: str | None = None,
+          hybrid: str | None = None, callbacks: list | None = None) -> TrainResult:
     """Train ``algo`` on ``env`` and save the run directory (see module doc).
 
     Parameters
@@ -145,6 +165,15 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
         ``env_name`` for the hyperparameter lookup and the config).
     timesteps : environment steps (default: the YAML ``n_timesteps``).
     hyperparams : overrides merged over the YAML entry.
+    env_kwargs : options of the environment (the task; evaluation uses these). The
+        recipe's ``env_kwargs`` (training-only options such as a tighter
+        ``state_bound``) are merged under them for training only.
+    hybrid : ``None`` (pure RL), ``"residual"`` (the action is a bounded correction of
+        the paper's controller, ``residual_scale`` of the recipe) or ``"bc"``
+        (behaviour-cloning warm start from the paper's controller, recipe key ``bc``:
+        ``{episodes, noise, epochs, lr}``); see :mod:`agents.hybrid`. The recipe is
+        looked up with the variant (``<env>-residual``, ``<env>-bc``).
+    callbacks : extra SB3 callbacks (e.g. :class:`agents.curves.EvalCurveCallback`).
     checkpoint_freq : environment steps between checkpoints (default: timesteps // 4; 0 disables).
     threads : torch threads (None keeps torch's default).
     """
@@ -155,17 +184,29 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     algo = algo.lower()
     if multi_agent and algo not in MULTI_AGENT_ALGOS:
         raise ValueError(f"multi-agent training supports {MULTI_AGENT_ALGOS}, not {algo!r}")
+    from .hybrid import HYBRIDS, behaviour_cloning_dataset, pretrain_ppo
+
+    if hybrid is not None and hybrid not in HYBRIDS:
+        raise ValueError(f"hybrid must be None or one of {HYBRIDS}, got {hybrid!r}")
+    if hybrid == "bc" and (algo != "ppo" or multi_agent):
+        raise ValueError("the behaviour-cloning warm start is implemented for centralised PPO (algo='ppo')")
     name = env_name or (env if isinstance(env, str) else "default")
-    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams)
+    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams, variant=hybrid)
     set_threads(threads)
     n_envs = int(hp.get("n_envs", 1))
     timesteps = int(timesteps if timesteps is not None else hp.get("n_timesteps", 100000))
+    user_kw = dict(env_kwargs or {})
     kw = dict(hp.get("env_kwargs") or {})
-    kw.update(env_kwargs or {})
+    kw.update(user_kw)
     agent_id = bool(hp.get("agent_id", False)) and multi_agent
-    norm_act = bool(hp.get("normalize_actions", False))
+    residual_scale = None
+    if hybrid == "residual":
+        residual_scale = hp.get("residual_scale")
+        if residual_scale is None:
+            raise ValueError(f"the residual recipe of {algo} on {name!r} needs 'residual_scale' in the hyperparameters")
+    norm_act = bool(hp.get("normalize_actions", False)) and residual_scale is None
     venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id,
-                         normalize_actions=norm_act)
+                         normalize_actions=norm_act, residual_scale=residual_scale)
     if norm_act and not multi_agent:
         inner_space = venv.envs[0].unwrapped.action_space  # the env's own bounds, for evaluation
         act_low, act_high = inner_space.low.tolist(), inner_space.high.tolist()
@@ -179,6 +220,9 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
         venv = VecNormalize(venv, **nk)
     algo_kw = {k: v for k, v in hp.items() if k not in _EXTRA_KEYS}
     algo_kw["policy_kwargs"] = _policy_kwargs(algo_kw.get("policy_kwargs"))
+    for key in ("learning_rate", "clip_range"):
+        if key in algo_kw:
+            algo_kw[key] = _schedule(algo_kw[key])
     noise = hp.get("action_noise")
     if noise and algo in ("td3", "sac"):
         d = venv.action_space.shape[0]
@@ -187,8 +231,14 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     os.makedirs(out, exist_ok=True)
     cls = _algo_class(algo)
     model = cls(hp.get("policy", "MlpPolicy"), venv, seed=seed, verbose=verbose, tensorboard_log=tensorboard, **algo_kw)
+    bc_info = None
+    if hybrid == "bc":
+        bc = dict(hp.get("bc") or {})
+        data = behaviour_cloning_dataset(gym_factory(env, kw), int(bc.get("episodes", 20)), seed=10_000_000 + seed,
+                                         noise=float(bc.get("noise", 0.1)))
+        bc_info = pretrain_ppo(model, data, epochs=int(bc.get("epochs", 30)), lr=float(bc.get("lr", 1e-3)), seed=seed)
     sb3_steps = timesteps * n_agents
-    callbacks = []
+    callbacks = list(callbacks or [])
     ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
     if ckpt > 0:
         callbacks.append(CheckpointCallback(save_freq=max(ckpt * n_agents // venv.num_envs, 1),
@@ -196,6 +246,16 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
                                             save_vecnormalize=bool(norm)))
     if progress:
         callbacks.append(TqdmCallback(timesteps, desc=f"{algo}{'-ma' if multi_agent else ''} {name}", scale=n_agents))
+    config = {
+        "env": name, "algo": algo, "multi_agent": multi_agent, "hybrid": hybrid, "residual_scale": residual_scale,
+        "bc": bc_info, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
+        "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
+        "env_kwargs": user_kw, "train_env_kwargs": kw, "normalize": bool(norm),
+        "hyperparams": {k: v for k, v in hp.items()},
+    }
+    for cb in callbacks:  # callbacks that evaluate the live agent need its configuration
+        if hasattr(cb, "agent_config"):
+            cb.agent_config = config
     t0 = time.perf_counter()
     model.learn(total_timesteps=sb3_steps, callback=CallbackList(callbacks) if callbacks else None,
                 tb_log_name=f"{algo}{'_ma' if multi_agent else ''}")
@@ -203,13 +263,7 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     model.save(os.path.join(out, "model.zip"))
     if norm:
         venv.save(os.path.join(out, "vecnormalize.pkl"))
-    config = {
-        "env": name, "algo": algo, "multi_agent": multi_agent, "seed": seed, "timesteps": timesteps,
-        "sb3_timesteps": int(model.num_timesteps), "n_agents": n_agents, "agent_id": agent_id,
-        "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
-        "env_kwargs": kw, "normalize": bool(norm), "train_seconds": seconds,
-        "hyperparams": {k: v for k, v in hp.items()},
-    }
+    config.update(sb3_timesteps=int(model.num_timesteps), train_seconds=seconds)
     with open(os.path.join(out, "config.json"), "w") as fh:
         json.dump(config, fh, indent=2, default=str)
     venv.close()
@@ -223,6 +277,22 @@ class TrainedAgent:
     ``parallel_policy(env)`` -> ``{agent: obs} -> {agent: action}`` (PettingZoo env,
     shared policy, same padding/one-hot as :class:`ParallelVecEnv`).
     """
+
+    @classmethod
+    def from_model(cls, model, vecnorm, config: dict) -> "TrainedAgent":
+        """The agent being trained (``model``, its live ``VecNormalize`` or None), e.g. for
+        learning curves: observations are normalised with the current statistics."""
+        self = cls.__new__(cls)
+        self.config, self.path, self.model = dict(config), None, model
+        self.algo = config["algo"]
+        self.multi_agent = bool(config["multi_agent"])
+        self.vecnorm = vecnorm
+        return self
+
+    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+        if self.vecnorm is None or not getattr(self.vecnorm, "norm_obs", False):
+            return obs
+        return self.vecnorm.normalize_obs(obs)
 
     def __init__(self, path: str, device: str = "cpu"):
         path = path[:-len("model.zip")] if path.endswith("model.zip") else path
@@ -242,8 +312,24 @@ class TrainedAgent:
             self.vecnorm.norm_reward = False
 
     @property
+    def hybrid(self) -> str | None:
+        return self.config.get("hybrid")
+
+    @property
     def name(self) -> str:
-        return f"{self.algo.upper()}{' (shared)' if self.multi_agent else ''}"
+        tag = {"residual": " residual", "bc": " BC-warm-start"}.get(self.hybrid or "", "")
+        return f"{self.algo.upper()}{tag}{' (shared)' if self.multi_agent else ''}"
+
+    def policy_for(self, env, deterministic: bool = True) -> Callable:
+        """The agent acting on the task's own env ``env`` (the PettingZoo env when the agent
+        is multi-agent, else the centralised Gymnasium env): ``obs -> applied input``.
+        A residual agent is composed with the paper's controller (:class:`agents.hybrid.ResidualPolicy`)."""
+        if self.hybrid == "residual":
+            from .hybrid import ResidualPolicy
+
+            corr = self.parallel_policy(env, deterministic) if self.multi_agent else self.central_policy(deterministic)
+            return ResidualPolicy(env, corr, float(self.config["residual_scale"]), parallel=self.multi_agent)
+        return self.parallel_policy(env, deterministic) if self.multi_agent else self.central_policy(deterministic)
 
     @property
     def observation_space(self):
@@ -254,9 +340,7 @@ class TrainedAgent:
         return self.model.action_space
 
     def predict(self, obs, deterministic: bool = True) -> np.ndarray:
-        obs = np.asarray(obs, dtype=np.float32)
-        if self.vecnorm is not None:
-            obs = self.vecnorm.normalize_obs(obs)
+        obs = self.normalize_obs(np.asarray(obs, dtype=np.float32))
         act, _ = self.model.predict(obs, deterministic=deterministic)
         return act
 
@@ -278,8 +362,14 @@ class TrainedAgent:
 
     def encoder_for(self, env) -> SlotEncoder:
         agents = list(env.possible_agents)
+        if self.hybrid == "residual":  # corrections in [-1, 1] per input component
+            from gymnasium import spaces
+
+            acts = {a: spaces.Box(-1.0, 1.0, env.action_space(a).shape, dtype=np.float32) for a in agents}
+        else:
+            acts = {a: env.action_space(a) for a in agents}
         enc = SlotEncoder(agents, {a: env.observation_space(a) for a in agents},
-                          {a: env.action_space(a) for a in agents}, agent_id=self.config.get("agent_id", False),
+                          acts, agent_id=self.config.get("agent_id", False),
                           rescale_actions=bool(self.config.get("normalize_actions", False)))
         if enc.observation_space.shape != self.observation_space.shape:
             raise ValueError(f"model expects observations of shape {self.observation_space.shape}, "

@@ -1,4 +1,4 @@
-"""The RL-versus-analytic benchmark end to end on the tiny budget, and the CLI."""
+"""The RL-versus-analytic benchmark end to end on the tiny budget (2 training seeds, 2 workers), and the CLI."""
 from __future__ import annotations
 
 import csv
@@ -11,76 +11,106 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("dobs_envs.tracking_v0")
 
-from agents.benchmark import AGENTS, BUDGETS, run_benchmark  # noqa: E402
+from agents.benchmark import AGENTS, ANALYTIC, BUDGETS, run_benchmark  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 
-ANALYTIC = {"paper (separation)", "oracle (full state)", "decentralised (no comm.)", "zero input"}
+TINY = BUDGETS["tiny"]
 
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     out = str(tmp_path_factory.mktemp("bench"))
-    doc = run_benchmark("tracking", "tiny", out, progress=False)
-    return out, doc
+    summ = run_benchmark("tracking", "tiny", out, progress=False, workers=2)
+    doc = json.load(open(os.path.join(out, "tracking", "results.json")))
+    return out, summ, doc
 
 
 def test_files_and_every_policy(tiny_run):
-    out, doc = tiny_run
-    for f in ("results.csv", "results.json", "error_norms.png"):
-        assert os.path.getsize(os.path.join(out, f)) > 0
-    expected = {AGENTS[k][2] for k in BUDGETS["tiny"]["agents"]} | ANALYTIC
+    out, summ, doc = tiny_run
+    for f in ("summary.json", "summary.png", "tracking/results.csv", "tracking/results.json",
+              "tracking/error_norms.png", "tracking/learning_curves.png"):
+        assert os.path.getsize(os.path.join(out, f)) > 0, f
+    expected = {AGENTS[k].label for k in TINY["agents"]} | set(ANALYTIC)
     assert {r["policy"] for r in doc["results"]} == expected
-    with open(os.path.join(out, "results.csv")) as fh:
+    with open(os.path.join(out, "tracking", "results.csv")) as fh:
         rows = list(csv.DictReader(fh))
     assert {r["policy"] for r in rows} == expected
     for r in rows:
-        for key in ("return_mean", "final_tracking_error_mean", "rms_estimation_error_mean", "control_effort_mean",
-                    "failure_rate"):
-            assert np.isfinite(float(r[key]))
+        for key in ("cost_ratio_iqm", "cost_ratio_ci_low", "cost_ratio_ci_high", "transient_cost_iqm",
+                    "steady_state_error_iqm", "failure_rate"):
+            assert np.isfinite(float(r[key])), key
+        assert float(r["cost_ratio_ci_low"]) <= float(r["cost_ratio_iqm"]) <= float(r["cost_ratio_ci_high"])
     for name in expected:
         assert name in doc["table"]
-    saved = json.load(open(os.path.join(out, "results.json")))
-    assert saved["eval_seeds"] == doc["eval_seeds"]
+    assert summ["tables"]["tracking"] == doc["table"]
 
 
-def test_same_seeds_and_initial_states_for_every_policy(tiny_run):
-    _, doc = tiny_run
-    seeds = doc["eval_seeds"]
-    assert len(seeds) == BUDGETS["tiny"]["episodes"] and len(set(seeds)) == len(seeds)
-    ref = None
-    for name, eps in doc["episodes_detail"].items():
-        assert [e["seed"] for e in eps] == seeds, name
-        x0 = np.array([e["x0"] for e in eps])
-        if ref is None:
-            ref = x0
-        np.testing.assert_array_equal(x0, ref, err_msg=name)  # gym and parallel envs draw the same x(0)
-    assert not np.array_equal(ref[0], ref[1])  # different episodes, different initial states
-
-
-def test_analytic_ordering_is_sane(tiny_run):
-    # 1-second tiny episodes: too short for returns to rank the controllers (the
-    # feedback laws pay their input effort first), but the oracle already pulls x
-    # towards x_r while the open-loop plant drifts away
-    _, doc = tiny_run
+def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
+    _, _, doc = tiny_run
     res = {r["policy"]: r for r in doc["results"]}
-    assert res["oracle (full state)"]["final_tracking_error_mean"] < res["zero input"]["final_tracking_error_mean"]
+    for k in TINY["agents"]:
+        assert res[AGENTS[k].label]["runs"] == TINY["seeds"]
+        assert res[AGENTS[k].label]["kind"] == ("hybrid" if AGENTS[k].hybrid else "RL")
+    p = res["paper (separation)"]
+    assert p["runs"] == 1 and p["cost_ratio_iqm"] == p["cost_ratio_ci_low"] == p["cost_ratio_ci_high"] == 1.0
     assert res["zero input"]["control_effort_mean"] == 0.0
+    # 1-second episodes: the oracle already pulls x towards x_r while the open-loop plant drifts
+    assert res["oracle (full state)"]["final_tracking_error_iqm"] < res["zero input"]["final_tracking_error_iqm"]
+    # different training seeds give different agents
+    eps = doc["episodes_detail"][AGENTS["ppo"].label]
+    assert eps["s0"][0]["cost"] != eps["s1"][0]["cost"]
 
 
-def test_cli_reuses_cached_models(tiny_run, capsys):
-    out, _ = tiny_run
-    assert main(["benchmark", "--env", "tracking", "--budget", "tiny", "--out", out, "--no-progress"]) == 0
+def test_same_seeds_and_initial_states_for_every_policy_and_run(tiny_run):
+    _, _, doc = tiny_run
+    seeds = doc["eval_seeds"]
+    assert len(seeds) == TINY["episodes"] and len(set(seeds)) == len(seeds)
+    ref = None
+    for name, runs in doc["episodes_detail"].items():
+        for run, eps in runs.items():
+            assert [e["seed"] for e in eps] == seeds, (name, run)
+            x0 = np.array([e["x0"] for e in eps])
+            if ref is None:
+                ref = x0
+            np.testing.assert_array_equal(x0, ref, err_msg=f"{name} {run}")
+    assert not np.array_equal(ref[0], ref[1])
+
+
+def test_learning_curves_cover_training(tiny_run):
+    out, _, doc = tiny_run
+    for k, steps in TINY["agents"].items():
+        c = doc["learning_curves"][AGENTS[k].label]
+        assert c is not None and c["env_steps"][0] <= steps // TINY["curve_points"] and c["env_steps"][-1] >= steps
+        assert all(lo <= m <= hi for lo, m, hi in zip(c["ci_low"], c["iqm"], c["ci_high"]))
+        assert os.path.exists(os.path.join(out, "models", "tracking", "tiny", k, "s0", "curve.json"))
+
+
+def test_cli_reuses_finished_runs(tiny_run, capsys):
+    out, _, _ = tiny_run
+    assert main(["benchmark", "--env", "tracking", "--budget", "tiny", "--out", out, "--no-progress",
+                 "--workers", "1"]) == 0
     printed = capsys.readouterr().out
-    assert "paper (separation)" in printed and "PPO (centralised)" in printed
-    doc = json.load(open(os.path.join(out, "results.json")))
-    assert all(v == 0.0 for k, v in doc["timings_s"].items() if k.startswith("train_"))
+    assert "paper (separation)" in printed and "PPO (centralised)" in printed and "95% CI" in printed
+    doc = json.load(open(os.path.join(out, "tracking", "results.json")))
+    assert all(v == 0.0 for secs in doc["train_seconds"].values() for v in secs)
 
 
-def test_cli_train_and_evaluate(tmp_path, capsys):
+@pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"]])
+def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--budget", "tiny", "--out", str(tmp_path), *argv])
+    assert exc.value.code == 2
+
+
+def test_cli_train_and_evaluate_residual(tmp_path, capsys):
     out = str(tmp_path / "run")
-    assert main(["train", "--env", "tracking", "--algo", "ppo", "--multi-agent", "--timesteps", "64", "--seed", "1",
-                 "--out", out, "--no-progress", "--hyperparams", json.dumps(BUDGETS["tiny"]["hyperparams"]["ppo"])]) == 0
-    assert os.path.exists(os.path.join(out, "model.zip"))
+    assert main(["train", "--env", "tracking", "--algo", "ppo", "--multi-agent", "--hybrid", "residual",
+                 "--timesteps", "64", "--seed", "1", "--out", out, "--no-progress",
+                 "--hyperparams", json.dumps(TINY["hyperparams"]["ppo"])]) == 0
+    cfg = json.load(open(os.path.join(out, "config.json")))
+    assert cfg["hybrid"] == "residual" and cfg["residual_scale"] > 0
+    # the recipe's training-only state bound is recorded apart from the task's env options
+    assert cfg["env_kwargs"] == {} and cfg["train_env_kwargs"]["state_bound"] == 30
     assert main(["evaluate", "--model", out, "--episodes", "1", "--seed", "3", "--json", str(tmp_path / "e.json")]) == 0
     summ = json.load(open(tmp_path / "e.json"))
-    assert summ["episodes"] == 1 and summ["seeds"] == [3]
+    assert summ["episodes"] == 1 and summ["seeds"] == [3] and summ["failure_rate"] == 0.0

@@ -240,6 +240,46 @@ def test_termination_penalty_charges_the_rest_of_the_horizon(penalty):
         assert sum(rewards) < -bound**2 * env.control_period * (400 - steps)
 
 
+def test_log_reward_is_the_log_of_the_quadratic_stage_cost():
+    """reward='log': -log(1 + c / c0) * period with c0 = lambda_max(Q) cost_scale^2, on the same trajectory."""
+    quad = tracking_v0.parallel_env(max_cycles=60)
+    log = tracking_v0.parallel_env(max_cycles=60, reward="log", cost_scale=0.2)
+    quad.reset(seed=4)
+    log.reset(seed=4)
+    T = quad.control_period
+    while quad.agents:
+        act = {a: quad.action_space(a).sample() * 0.1 for a in quad.agents}
+        _, rq, *_ = quad.step(act)
+        _, rl, *_ = log.step(act)
+        c = -rq["controller_0"] / T
+        assert rl["controller_0"] == pytest.approx(-math.log1p(c / 0.2**2) * T, rel=1e-12)
+
+
+def test_log_reward_termination_penalty_uses_the_same_shape():
+    bound = 15.0
+    env = tracking_v0.parallel_env(state_bound=bound, reward="log", cost_scale=0.1)
+    env.reset(seed=0)
+    hi = {a: env.action_space(a).high for a in env.agents}
+    steps, rewards = 0, []
+    while env.agents:
+        _, rew, *_ = env.step(hi)
+        steps += 1
+        rewards.append(rew["controller_0"])
+    x, x_r = env.sim_state.x[0], env.sim_state.x_r[0]
+    u = np.concatenate([hi[a] for a in env.possible_agents]).astype(float)
+    c = (x - x_r) @ (x - x_r) + u @ u
+    per_step = math.log1p(bound**2 / 0.1**2) * env.control_period
+    assert rewards[-1] == pytest.approx(-math.log1p(c / 0.01) * env.control_period - per_step * (400 - steps), rel=1e-9)
+
+
+@pytest.mark.parametrize("kw,match", [({"reward": "exp"}, "reward must be one of"),
+                                      ({"cost_scale": 0.0}, "cost_scale"), ({"cost_scale": float("nan")}, "cost_scale"),
+                                      ({"cost_scale": True}, "cost_scale")])
+def test_reward_options_are_validated(kw, match):
+    with pytest.raises(ValueError, match=match):
+        tracking_v0.parallel_env(**kw)
+
+
 def test_timing_options():
     env = tracking_v0.parallel_env(dt=2e-3, substeps=10, horizon=1.0)
     assert env.control_period == pytest.approx(0.02) and env.max_cycles == 50

@@ -68,6 +68,9 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
 
     ``-(x'Qx + sum_k u_k' R_k u_k) * T`` per control step (``x`` at the end of
     the step), ``Q = I_9``, ``R = I_5`` by default; shared by all agents.
+    ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
+    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 
@@ -94,7 +97,8 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ``disturbance_rejection_v0.parallel_env(disturbance="exosystem", disturbance_amplitude=2.0,
     dt=1e-3, substeps=50, max_cycles=None, horizon=None, observation="local",
     obs_dtype="float32", Q=None, R=None, action_bound=None, init_noise=None,
-    state_bound=1e3, render_mode=None, scenario=None)`` (see ``tracking_v0``
+    state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1,
+    render_mode=None, scenario=None)`` (see ``tracking_v0``
     for the shared ones). ``scenario=`` accepts any Scenario with an unknown
     input ``B_v``.
 

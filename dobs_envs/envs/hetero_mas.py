@@ -59,6 +59,9 @@ class HeteroMASEnv(DObsParallelEnv):
     Shared ``-(x'Qx + sum_i r u_i^2) * T`` with the rendezvous weight
     ``Q = S^T Pi S + 0.1 (I - S^T S)`` (``x'Qx = sum_i (p_i - pbar)^2 + 0.1 ||rest||^2``,
     :func:`~dobs_envs.scenarios.mas_tasks.rendezvous_cost`) and ``r = 1``.
+    ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
+    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 
@@ -84,7 +87,7 @@ class HeteroMASEnv(DObsParallelEnv):
 
     ``hetero_mas_v0.parallel_env(q_rest=0.1, r=1.0, rho=1e-3, dt=1e-3, substeps=50,
     max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
-    R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True, render_mode=None,
+    R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1, render_mode=None,
     scenario=None)``; ``q_rest``, ``r``, ``rho`` parametrise the task
     (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
     takes any multi-agent Scenario (``mas_agents``).

@@ -63,6 +63,9 @@ class RandomNetworkEnv(DObsParallelEnv):
 
     ``-(e'Qe + u'Ru) * T`` with ``e = x`` (``x - x_r`` for a tracking
     controller), ``Q = I``, ``R = I`` unless given.
+    ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
+    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 

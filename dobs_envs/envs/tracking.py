@@ -66,6 +66,9 @@ class TrackingEnv(DObsParallelEnv):
     ``e = x - x_r`` evaluated at the end of the step, ``u`` the applied (clipped)
     input, ``T`` the control period; ``Q = I_9``, ``R = I_5`` by default
     (``Q=``, ``R=`` options).
+    ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
+    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 
@@ -94,7 +97,7 @@ class TrackingEnv(DObsParallelEnv):
 
     ``tracking_v0.parallel_env(dt=1e-3, substeps=50, max_cycles=None, horizon=None,
     observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
-    init_noise=None, state_bound=1e3, termination_penalty=True, render_mode=None, scenario=None)``.
+    init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1, render_mode=None, scenario=None)``.
     ``dt`` is the Euler step of the simulation and ``substeps`` the number of
     Euler steps per control step (inputs held, ZOH): control period
     ``dt * substeps`` = 0.05 s by default; ``substeps=1`` is the paper's
