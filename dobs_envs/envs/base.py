@@ -274,7 +274,7 @@ class DObsParallelEnv(ParallelEnv):
         (:mod:`baselines.paper`, at this env's control period) over ``episodes`` initial states of the
         default distribution (fixed calibration seed 12345), simulated for ``min(horizon, max_seconds)``;
         at least 1 per component. Deterministic for a given scenario and options."""
-        from dobs_envs.reproduce import paper_policy
+        from ..control import paper_policy
 
         sc, p = self.scenario, self.params
         rng = np.random.default_rng(12345)

@@ -31,7 +31,7 @@ from .signals import Sinusoids
 
 __all__ = ["Scenario", "CONTROLLERS"]
 
-#: Controllers a scenario can name as its paper reference (see baselines.paper).
+#: Controllers a scenario can name as its paper reference (see dobs_envs.control.laws).
 CONTROLLERS = ("open_loop", "feedback", "tracking", "sliding_mode", "adaptive_sliding_mode")
 
 
