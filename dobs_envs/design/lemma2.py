@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from .subspaces import (
+from ..linalg.subspaces import (
     annihilator,
     classify_stable_eigenvalues,
     is_hurwitz,
@@ -59,6 +59,7 @@ from .subspaces import (
     orth,
     rank_tol,
 )
+from ..linalg.validation import as_matrix, as_square
 
 __all__ = ["StrongDetectability", "strong_detectability", "lemma2_residuals", "DEFAULT_MARGIN"]
 
@@ -110,32 +111,10 @@ class StrongDetectability:
 # ---------------------------------------------------------------------------
 # validation
 # ---------------------------------------------------------------------------
-def _as_matrix(name: str, M) -> np.ndarray:
-    if np.iscomplexobj(M):
-        raise ValueError(f"{name} must be real, got a complex array")
-    try:
-        arr = np.array(M, dtype=float, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real 2-D array ({exc})") from None
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be 2-D, got an array with ndim={arr.ndim} and shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains non-finite entries (NaN or inf)")
-    return arr
-
-
 def _validate(A, B_unknown, C):
-    A = _as_matrix("A", A)
-    B = _as_matrix("B_unknown", B_unknown)
-    C = _as_matrix("C", C)
+    A = as_square(A, "A", nonempty=True)
     n = A.shape[0]
-    if A.shape != (n, n) or n == 0:
-        raise ValueError(f"A must be square and non-empty (n x n), got shape {A.shape}")
-    if B.shape[0] != n:
-        raise ValueError(f"B_unknown must have n = {n} rows (same as A), got shape {B.shape}")
-    if C.shape[1] != n:
-        raise ValueError(f"C must have n = {n} columns (same as A), got shape {C.shape}")
-    return A, B, C
+    return A, as_matrix(B_unknown, "B_unknown", rows=n), as_matrix(C, "C", cols=n)
 
 
 # ---------------------------------------------------------------------------

@@ -19,6 +19,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.linalg import expm
 
+from ..linalg.validation import as_array
+
 __all__ = ["SimState", "SimParams"]
 
 
@@ -253,13 +255,11 @@ class SimParams:
     def initial_state(self, x0, *, z0=None, gamma0=0.1, gamma_s0=0.1, v0=None, x_r0=None, t0=0.0) -> SimState:
         """Batched initial state. ``x0`` is (n,) or (B, n); ``z0`` defaults to 0 (paper)."""
         n, N, m_v = self.n_states, self.n_nodes, self.n_unknown
-        x0 = np.array(x0, dtype=float, copy=True)
+        x0 = as_array(x0, "x0")
         if x0.ndim == 1:
             x0 = x0[None]
         if x0.ndim != 2 or x0.shape[1] != n:
             raise ValueError(f"x0 must have shape ({n},) or (batch, {n}), got {x0.shape}")
-        if not np.all(np.isfinite(x0)):
-            raise ValueError("x0 contains NaN or inf")
         Bsz = x0.shape[0]
 
         def batched(name, val, shape):
