@@ -6,7 +6,8 @@ holding everything any agent may observe::
     f = [ y (sum_i p_i) | xhat_0..xhat_{N-1} (N n) | x (n) | x_r (n) | gamma (N) | gamma_s (N)
           | v (m_v) | r (m) | t (1) | e (n) | 0 (1) | 1 (1) ]
 
-(written by one compiled call, :func:`write_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
+(written by one compiled call, :func:`write_features`; readable numpy reference in
+:mod:`dobs_envs.envs.numpy_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
 gather, which also copies). Padding entries point at the constant 0, mask
 entries at the constant 1 (or 0 for padding). This keeps the per-step cost at
 one gather per agent whatever components are selected.
@@ -40,7 +41,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace"]
+__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace",
+           "pack_static", "unpack_static", "write_features_packed"]
 
 COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
 LOCAL = ("y", "xhat", "neighbors", "mask", "r")
@@ -272,9 +274,13 @@ def pack_static(C, G, ref, Q, R, off, idx, F):
 
 
 @_njit
-def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
-    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
-    ``SF``/``SI`` from :func:`pack_static`."""
+def unpack_static(SF, SI):
+    """Views of the static arrays packed by :func:`pack_static`.
+
+    Returns ``(F, C (N, p, n), G (N, n, p), ref (3, m), Q (n, n), R (m, m), off, idx)``
+    with ``F`` the feature-vector length, ``off`` the offsets of
+    :func:`write_features` and ``idx`` the concatenated agent gathers.
+    """
     F, N, p, n, m, mr, no, ni = SI[0], SI[1], SI[2], SI[3], SI[4], SI[5], SI[6], SI[7]
     a = 0
     C = SF[a:a + N * p * n].reshape((N, p, n)); a += N * p * n
@@ -284,5 +290,15 @@ def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, o
     R = SF[a:a + m * m].reshape((m, m))
     off = SI[8:8 + no]
     idx = SI[8 + no:8 + no + ni]
+    return F, C, G, ref, Q, R, off, idx
+
+
+@_njit
+def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
+    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
+    ``SF``/``SI`` from :func:`pack_static`. Readable reference:
+    :func:`dobs_envs.envs.numpy_features.write_features_reference` (same signature)."""
+    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    N, m = C.shape[0], R.shape[0]
     return write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, W[:F], off, W[F:F + N], Q, R,
                           W[F + N:F + N + m], idx, out)
