@@ -11,6 +11,7 @@ for the simulation kernel. From the batch-1 simulation arrays it computes
 - the reference command of eq. (refxdy): ``r_j(t) = a_j sin(w_j t + phi_j)`` (tracking only),
 - the task error ``e = x - x_r`` (tracking) or ``e = x`` (stabilisation),
 - the step cost ``e'Qe + u'Ru`` and the norms ``||e||``, ``||x||``,
+- whether the whole simulated state (``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s``, ``v``) is finite,
 
 writes them into the feature vector ``f`` (layout in :mod:`dobs_envs.envs.observation`)
 and gathers all agents' observations ``out = f[idx]``.
@@ -39,8 +40,14 @@ def write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref
 
     Returns
     -------
-    cost : float ``e'Qe + u'Ru``; track_err : float ``||e||``; x_norm : float ``||x||``.
+    cost : float ``e'Qe + u'Ru``; track_err : float ``||e||``; x_norm : float ``||x||``;
+    finite : bool, every entry of ``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s``, ``v`` is finite.
     """
+    with np.errstate(all="ignore"):  # IEEE semantics, silently (as the compiled kernel)
+        return _features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out)
+
+
+def _features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
     F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
     N, n = z.shape[1], z.shape[2]
     p_i = off[10:10 + N]
@@ -68,4 +75,5 @@ def write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref
 
     cost = float(e @ (Q @ e) + u @ (R @ u))
     out[:] = f[idx]
-    return cost, float(np.linalg.norm(e)), float(np.linalg.norm(x0))
+    finite = all(np.isfinite(a).all() for a in (x, x_r, z, gamma, gamma_s, v))
+    return cost, float(np.linalg.norm(e)), float(np.linalg.norm(x0)), bool(finite)

@@ -166,7 +166,7 @@ class FeatureLayout:
 try:
     import numba as _numba
 
-    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)
+    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)  # no fast-math: the finiteness test must see NaN/inf
 except ImportError:  # pragma: no cover
     def _njit(f):
         return f
@@ -182,12 +182,15 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
     amplitude, frequency, phase of ``r(t)``. Writes ``est[i] = ||xhat_i - x||``.
     Then gathers ``out[j] = f[idx[j]]`` (all agents' observations, concatenated; ``out`` is
     a fresh array of the observation dtype).
-    Returns ``(e'Qe + u'Ru, ||e||, ||x||)`` with ``e = x - x_r`` (``has_ref``) or ``x``.
+    Returns ``(e'Qe + u'Ru, ||e||, ||x||, finite)`` with ``e = x - x_r`` (``has_ref``) or ``x``
+    and ``finite`` True iff every entry of ``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s`` and ``v``
+    is finite (accumulated as ``sum(value * 0)``, which is 0 exactly when all are finite).
     Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``, ``xhat_i = z_i + G_i y_i``.
     """
     N, n = z.shape[1], z.shape[2]
     p = C.shape[1]
     y = np.empty(p)
+    nonfin = 0.0  # stays 0.0 iff all state entries are finite (inf * 0 and NaN * 0 are NaN)
     oy = off[0]
     oxh = off[1]
     for i in range(N):
@@ -205,7 +208,9 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
             s = 0.0
             for q in range(p):
                 s += G[i, k, q] * y[q]
-            xh = z[0, i, k] + s
+            zk = z[0, i, k]
+            nonfin += zk * 0.0
+            xh = zk + s
             f[oxh + i * n + k] = xh
             d = xh - x[0, k]
             ss += d * d
@@ -216,14 +221,17 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
         f[off[2] + k] = x[0, k]
         f[off[3] + k] = x_r[0, k]
         xx += x[0, k] * x[0, k]
+        nonfin += x[0, k] * 0.0 + x_r[0, k] * 0.0
         e = x[0, k] - x_r[0, k] if has_ref else x[0, k]
         f[off[9] + k] = e
         ee += e * e
     for i in range(N):
         f[off[4] + i] = gamma[0, i]
         f[off[5] + i] = gamma_s[0, i]
+        nonfin += gamma[0, i] * 0.0 + gamma_s[0, i] * 0.0
     for j in range(v.shape[1]):
         f[off[6] + j] = v[0, j]
+        nonfin += v[0, j] * 0.0
     m = ref.shape[1]
     if has_ref:
         for j in range(m):
@@ -244,7 +252,7 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
         cost += u[k] * s
     for j in range(idx.shape[0]):
         out[j] = f[idx[j]]
-    return cost, np.sqrt(ee), np.sqrt(xx)
+    return cost, np.sqrt(ee), np.sqrt(xx), nonfin == 0.0
 
 
 @_njit

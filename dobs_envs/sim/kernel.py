@@ -10,10 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 
+#: LLVM fast-math flags of the kernel: reassociation and contraction (FMA) but *not*
+#: ``nnan``/``ninf``, so NaN and inf propagate as IEEE arithmetic says (an overflowing
+#: observer yields a non-finite state the environment detects and terminates on,
+#: instead of undefined behaviour). Measured on NE2 (50 substeps, 1 env): ~36-38 us per
+#: control period with these flags, ~41 us with ``fastmath=True``, ~43 us without fastmath.
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
 try:  # numba is a hard dependency, but keep the package importable without it
     import numba
 
-    _njit = numba.njit(cache=True, fastmath=True, nogil=True, error_model="numpy")
+    _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy")
     HAVE_NUMBA = True
 except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
@@ -22,7 +29,7 @@ except ImportError:  # pragma: no cover
         return f
 
 
-__all__ = ["HAVE_NUMBA", "control_period_compiled"]
+__all__ = ["HAVE_NUMBA", "FASTMATH", "control_period_compiled"]
 
 
 @_njit
