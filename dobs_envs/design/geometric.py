@@ -46,7 +46,7 @@ of Table I. The double integrator ``x1' = x2, x2' = u, y = x1`` has
 Stability classification
 ------------------------
 Marginal modes (``Re = 0``: integrators, imaginary-axis pairs) count as *not*
-stable (:func:`~dobs_envs.design.subspaces.stable_mask`). Eigenvalues of
+stable (:func:`~dobs_envs.linalg.subspaces.stable_mask`). Eigenvalues of
 defective (Jordan) blocks are ill-conditioned: a nilpotent block of size
 ``k`` perturbed by round-off ``~1e-16`` has computed eigenvalues spread on a
 circle of radius ``~1e-16^(1/k)`` (``~5e-4`` for the paper's 5-chain of
@@ -54,7 +54,7 @@ integrators after an orthogonal change of basis), some with ``Re < -1e-8``.
 Classifying such eigenvalues one by one would call part of an integrator chain
 stable. We therefore cluster the computed eigenvalues and classify each
 cluster by its *mean*, which is well conditioned
-(:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`); the
+(:func:`~dobs_envs.linalg.subspaces.classify_stable_eigenvalues`); the
 invariant subspace is then taken from an ordered real Schur form.
 
 A cluster is a set of computed eigenvalues that a perturbation of the size of
@@ -67,7 +67,7 @@ one cluster classified by its mean -- an unstable unobserved mode was then
 called reconstructible.
 
 All rank decisions go through the SVD helpers of
-:mod:`dobs_envs.design.subspaces` with the optional absolute tolerance ``tol``
+:mod:`dobs_envs.linalg.subspaces` with the optional absolute tolerance ``tol``
 (``None``: the helpers' relative default).
 """
 from __future__ import annotations
@@ -149,7 +149,7 @@ def minimal_conditioned_invariant(A, B, C, tol: float | None = None) -> np.ndarr
         ``p = 0`` is allowed (then ``S*`` is the reachable subspace ``<A | B>``).
     tol : float, optional
         Absolute singular-value threshold for every rank decision (``None``:
-        relative default of :func:`~dobs_envs.design.subspaces.rank_tol`).
+        relative default of :func:`~dobs_envs.linalg.subspaces.rank_tol`).
 
     Returns
     -------
@@ -246,7 +246,7 @@ def unstable_subspace(M) -> np.ndarray:
     stable (``Re >= -STABILITY_TOL * max(1, |M|_2)``, marginal modes included).
 
     Eigenvalues are classified per cluster (see
-    :func:`~dobs_envs.design.subspaces.eigenvalue_clusters`) by the cluster mean, so perturbed Jordan blocks of integrators stay
+    :func:`~dobs_envs.linalg.subspaces.eigenvalue_clusters`) by the cluster mean, so perturbed Jordan blocks of integrators stay
     unstable as a whole; the subspace is read off an ordered real Schur form.
 
     Parameters

@@ -267,7 +267,7 @@ def strong_detectability(
         Absolute singular-value threshold for every rank decision. It is
         applied to the internally normalised data (``A / ||A||_2``, orthonormal
         bases of ``Im B_unknown`` and of the row space of ``C``), so it is
-        unit-free. Default: :func:`~dobs_envs.design.subspaces.rank_tol`.
+        unit-free. Default: :func:`~dobs_envs.linalg.subspaces.rank_tol`.
     margin : float, optional
         Requested stability margin of the assignable part of ``E`` (in the time
         unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
@@ -295,11 +295,11 @@ def strong_detectability(
     -----
     Steps 1-6 follow the Appendix, with ``Phi_j, Psi_j`` from SVDs
     (:func:`_rank_factor`, ``Psi_j`` orthogonal) and every ``Xi_j`` an
-    orthonormal annihilator (:func:`~dobs_envs.design.subspaces.annihilator`).
+    orthonormal annihilator (:func:`~dobs_envs.linalg.subspaces.annihilator`).
     Step 6 (Wonham's detectability decomposition of ``(Pi_3, Pi_4)``): the
     undetectable subspace is the part of the unobservable subspace of
     ``(Pi_3, Pi_4)`` belonging to eigenvalues with ``Re >= 0`` (marginal modes
-    count as *not* stable, :func:`~dobs_envs.design.subspaces.stable_mask`;
+    count as *not* stable, :func:`~dobs_envs.linalg.subspaces.stable_mask`;
     eigenvalues of defective blocks are classified by cluster mean); ``P_Pi``
     is orthogonal, ``r_d`` is the dimension of the detectable quotient.
     Step 8 uses a QR factorisation (Gram-Schmidt) and triangular solves.
@@ -348,7 +348,7 @@ def strong_detectability(
        harmless; ``E, F, G`` are mapped back exactly.
     3. Marginal eigenvalues of ``Pi_3`` on its unobservable subspace count as
        undetectable; defective eigenvalues are classified by cluster mean
-       (:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`),
+       (:func:`~dobs_envs.linalg.subspaces.classify_stable_eigenvalues`),
        since e.g. the NE2 integrator chains give computed eigenvalues with
        ``|Re| ~ 1e-3``. Clusters are pseudospectral components (eigenvalues a
        backward error of the eigensolver could merge), not a radius relative
