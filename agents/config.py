@@ -44,13 +44,10 @@ __all__ = ["ENVS", "ALGOS", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gy
 
 HYPERPARAMS_DIR = os.path.join(os.path.dirname(__file__), "hyperparams")
 
-#: benchmark environments: short name -> (Gymnasium id, PettingZoo module)
-ENVS = {
-    "tracking": ("dobs_envs/Tracking-v0", "dobs_envs.tracking_v0"),
-    "disturbance_rejection": ("dobs_envs/DisturbanceRejection-v0", "dobs_envs.disturbance_rejection_v0"),
-    "hetero_mas": ("dobs_envs/HeteroMAS-v0", "dobs_envs.hetero_mas_v0"),
-    "random_network": ("dobs_envs/RandomNetwork-v0", "dobs_envs.random_network_v0"),
-}
+from dobs_envs.registry import ENVIRONMENTS as _REGISTRY  # noqa: E402
+
+#: benchmark environments: short name -> (Gymnasium id, PettingZoo module), from dobs_envs.registry
+ENVS = {name: (e.gym_id, e.module) for name, e in _REGISTRY.items()}
 
 ALGOS = ("ppo", "sac", "td3")
 MULTI_AGENT_ALGOS = ("ppo", "sac")

@@ -14,7 +14,7 @@ the estimate ``xhat_{links[k]}`` its observer node sends over the C-O link
   * ``"adaptive_sliding_mode"`` (Theorem adsmthm, eqs. hepsfunc, adlawbeta):
     ``u^k = K^k xhat - beta^k h_eps((B^k)^T P xhat)`` with ``beta^k`` kept
     internally and advanced once per call by the exact solution of the
-    leakage law over one control period (as :mod:`baselines.paper`); call
+    leakage law over one control period (as :mod:`dobs_envs.control.laws`); call
     :meth:`SeparationPolicy.reset` at every episode start.
   * ``"open_loop"`` (NE1): the scenario's prescribed input ``u(t)``, with ``t``
     counted internally from the control period (reset it per episode).
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .paper import SeparationController
+from dobs_envs.control import SeparationController
 
 __all__ = ["SeparationPolicy", "CentralizedSeparationPolicy", "ZeroPolicy"]
 
@@ -74,7 +74,7 @@ class SeparationPolicy:
                 raise ValueError(f"{kind!r} policy needs the scenario's feedback gain K")
             if kind in ("sliding_mode", "adaptive_sliding_mode") and sc.P is None:
                 raise ValueError(f"{kind!r} policy needs the scenario's sliding-mode matrix P")
-            # the laws themselves live in baselines.paper (one implementation)
+            # the laws themselves live in dobs_envs.control.laws (one implementation)
             self._law = SeparationController.from_scenario(sc, kind)
         self.kind = kind
         self.agents = list(base.possible_agents)

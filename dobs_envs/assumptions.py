@@ -25,7 +25,8 @@ whose message reads ``"Assumption k (<name>) of Cao & Yin fails: <what is missin
 Section AIHMAS under which Assumption 6 holds for a heterogeneous multi-agent
 system; it raises :class:`DetectabilityError` (``assumption = 6``).
 
-All rank decisions use the SVD helpers of :mod:`dobs_envs.design.subspaces`.
+All rank decisions use the SVD helpers of :mod:`dobs_envs.linalg.subspaces`; arguments are
+checked by :mod:`dobs_envs.linalg.validation` (errors name the argument).
 """
 from __future__ import annotations
 
@@ -33,15 +34,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .design.subspaces import (
-    STABILITY_TOL,
-    stable_mask,
-    orth,
-    orth_complement,
-    rank_tol,
-    subspace_sum,
-)
 from .graphs import Graph, as_graph
+from .linalg.subspaces import STABILITY_TOL, orth, orth_complement, rank_tol, stable_mask, subspace_sum
+from .linalg.validation import as_matrix, as_square
 
 __all__ = [
     "AssumptionError",
@@ -236,31 +231,6 @@ class CollectiveDetectabilityError(AssumptionError):
 
 
 # ---------------------------------------------------------------------- helpers
-def _as_matrix(M, name: str, rows: int | None = None, cols: int | None = None) -> np.ndarray:
-    try:
-        M = np.array(M, dtype=float, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real numeric matrix ({exc})") from None
-    if M.ndim == 1 and rows is not None and M.shape[0] == rows:
-        M = M.reshape(rows, 1)  # a single column given as a vector
-    if M.ndim != 2:
-        raise ValueError(f"{name} must be 2-D, got shape {M.shape}")
-    if rows is not None and M.shape[0] != rows:
-        raise ValueError(f"{name} must have {rows} rows, got shape {M.shape}")
-    if cols is not None and M.shape[1] != cols:
-        raise ValueError(f"{name} must have {cols} columns, got shape {M.shape}")
-    if not np.all(np.isfinite(M)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return M
-
-
-def _square(A, name: str = "A") -> np.ndarray:
-    A = _as_matrix(A, name)
-    if A.shape[0] != A.shape[1]:
-        raise ValueError(f"{name} must be square (n, n), got shape {A.shape}")
-    return A
-
-
 def controllable_subspace(A: np.ndarray, B: np.ndarray, tol: float | None = None) -> np.ndarray:
     """Orthonormal basis of the controllable subspace ``Im [B, AB, ..., A^{n-1} B]``.
 
@@ -287,9 +257,9 @@ def uncontrollable_eigenvalues(A, B, tol: float | None = None) -> np.ndarray:
     equivalent to the PBH rank test but does not depend on eigenvalues of
     defective (Jordan) blocks being computed accurately.
     """
-    A = _square(A)
+    A = as_square(A)
     n = A.shape[0]
-    B = _as_matrix(B, "B", rows=n)
+    B = as_matrix(B, "B", rows=n, vector_as="col")
     R = controllable_subspace(A, B, tol)
     Q2 = orth_complement(R, n)
     if Q2.shape[1] == 0:
@@ -303,9 +273,9 @@ def pbh_rank(A: np.ndarray, B: np.ndarray, lam: complex, tol: float | None = Non
     ``lam`` is an uncontrollable eigenvalue iff the rank is ``< n``. Reliable
     for simple eigenvalues; for defective ones use :func:`uncontrollable_eigenvalues`.
     """
-    A = _square(A)
+    A = as_square(A)
     n = A.shape[0]
-    B = _as_matrix(B, "B", rows=n)
+    B = as_matrix(B, "B", rows=n, vector_as="col")
     M = np.hstack([A - lam * np.eye(n), B.astype(complex)])
     s = np.linalg.svd(M, compute_uv=False)
     return int(np.sum(s > rank_tol(s, M.shape, tol)))
@@ -325,7 +295,7 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
         this stronger requirement fails, the error has ``margin_only = True``
         and its message says that Assumption 3 itself holds. Marginal
         modes (``Re = 0``) always count as not stabilizable, with the
-        tolerance :data:`~dobs_envs.design.subspaces.STABILITY_TOL`.
+        tolerance :data:`~dobs_envs.linalg.subspaces.STABILITY_TOL`.
     tol : float, optional
         Absolute SVD threshold for the rank decisions.
 
@@ -334,9 +304,9 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
     StabilizabilityError
         Listing the uncontrollable eigenvalues with ``Re >= -margin``.
     """
-    A = _square(A)
+    A = as_square(A)
     n = A.shape[0]
-    B = _as_matrix(B, "B", rows=n)
+    B = as_matrix(B, "B", rows=n, vector_as="col")
     ev = uncontrollable_eigenvalues(A, B, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -360,9 +330,9 @@ def check_detectable(A, C, *, margin: float = 0.0, tol: float | None = None, nam
     Raises :class:`DetectabilityError` listing the unobservable eigenvalues
     with ``Re >= -margin``; ``name`` labels the pair in the message (e.g. the agent).
     """
-    A = _square(A)
+    A = as_square(A)
     n = A.shape[0]
-    C = _as_matrix(C, "C", cols=n)
+    C = as_matrix(C, "C", cols=n)
     ev = uncontrollable_eigenvalues(A.T, C.T, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -398,9 +368,9 @@ def check_matching(B, B_v, *, rtol: float = MATCHING_RTOL) -> np.ndarray:
     MatchingConditionError
         With the residual and an orthonormal basis of the unmatched directions.
     """
-    B = _as_matrix(B, "B")
+    B = as_matrix(B, "B")
     n, m = B.shape
-    B_v = _as_matrix(B_v, "B_v", rows=n)
+    B_v = as_matrix(B_v, "B_v", rows=n, vector_as="col")
     mv = B_v.shape[1]
     if mv == 0:
         return np.zeros((m, 0))
@@ -512,7 +482,7 @@ def check_exosystem_bounded(S, *, axis_rtol: float = EXO_AXIS_RTOL) -> None:
     ------
     UnboundedExosystemError
     """
-    S = _square(S, "S")
+    S = as_square(S, "S")
     k = S.shape[0]
     if k == 0:
         return

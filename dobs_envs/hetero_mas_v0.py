@@ -1,11 +1,11 @@
 """``hetero_mas_v0``: PettingZoo parallel environment (see :class:`dobs_envs.envs.HeteroMASEnv` for the spec).
 
-``parallel_env(**kwargs)`` builds the ParallelEnv (``raw_env`` is its class);
+``parallel_env(**kwargs)`` builds the ParallelEnv (``raw_env`` is its class, the
+entry point of ``dobs_envs.registry.ENVIRONMENTS["hetero_mas"]``);
 ``env(**kwargs)`` is its AEC form (``pettingzoo.utils.parallel_to_aec``).
 """
-from .envs import HeteroMASEnv as raw_env
 from .envs.module_api import module_api
 
 __all__ = ["parallel_env", "raw_env", "env"]
 
-parallel_env, env = module_api(raw_env)
+raw_env, parallel_env, env = module_api("hetero_mas")

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .control import paper_policy
 from .scenarios.paper import PAPER_SCENARIOS
 from .sim import estimates, step_env
 
@@ -41,15 +42,6 @@ class Trajectory:
         """``||x - x_r||`` (or ``||x||`` for stabilisation), (T,)."""
         e = self.x if self.x_r is None else self.x - self.x_r
         return np.linalg.norm(e, axis=-1)
-
-
-def paper_policy(sc):
-    """The controller the paper applies in scenario ``sc`` (a baselines object)."""
-    from baselines.paper import PrescribedInput, SeparationController
-
-    if sc.controller == "open_loop":
-        return PrescribedInput(sc.prescribed_input)
-    return SeparationController.from_scenario(sc)
 
 
 def simulate(sc, *, t_end: float | None = None, dt: float | None = None, backend: str = "numba",

@@ -102,3 +102,17 @@ def test_estimates_definition():
     i = 2
     expected = s.z[1, i] + d.G_bar[i] @ (d.C[i] @ s.x[1])
     np.testing.assert_allclose(xh[1, i], expected, atol=1e-12)
+
+
+def test_kernel_args_built_once_and_follow_the_timing():
+    from dobs_envs.sim import KernelArgs
+
+    rng = np.random.default_rng(5)
+    prm = SimParams.from_design(_random_design(rng), dt=1e-3, substeps=7)
+    ka = prm.kernel_args
+    assert isinstance(ka, KernelArgs) and prm.kernel_args is ka  # cached
+    assert prm.kernel_tuple == tuple(ka) and prm.kernel_tuple is prm.kernel_tuple
+    assert ka.A is prm.A and ka.degree is prm.degree and (ka.dt, ka.substeps) == (1e-3, 7)
+    p2 = prm.with_timing(dt=2e-3, substeps=3)
+    assert (p2.kernel_args.dt, p2.kernel_args.substeps) == (2e-3, 3)
+    np.testing.assert_array_equal(p2.kernel_args.Phi_v, p2.Phi_v)

@@ -19,36 +19,10 @@ import numpy as np
 import scipy.linalg as sla
 
 from .. import assumptions as _asm
-from .subspaces import is_hurwitz
+from ..linalg.subspaces import is_hurwitz
+from ..linalg.validation import as_matrix, as_square, as_symmetric
 
 __all__ = ["shifted_are_feedback", "lyapunov_P", "observer_are_gain", "split_gain"]
-
-#: Relative symmetry tolerance for user weight matrices Q, R.
-_SYM_RTOL = 1e-10
-
-
-def _sym_weight(M, size: int, name: str, definite: bool) -> np.ndarray:
-    if M is None:
-        return np.eye(size)
-    M = np.array(M, dtype=float, copy=True)
-    if M.ndim == 0 and size == 1:
-        M = M.reshape(1, 1)
-    if M.shape != (size, size):
-        raise ValueError(f"{name} must have shape ({size}, {size}), got {M.shape}")
-    if not np.all(np.isfinite(M)):
-        raise ValueError(f"{name} contains NaN or inf")
-    scale = max(1.0, float(np.abs(M).max()))
-    if np.abs(M - M.T).max() > _SYM_RTOL * scale:
-        raise ValueError(f"{name} must be symmetric")
-    M = 0.5 * (M + M.T)
-    ev = np.linalg.eigvalsh(M) if size else np.zeros(0)
-    if definite and size and ev.min() <= 1e-12 * scale:
-        raise ValueError(f"{name} must be symmetric positive definite (min eigenvalue {ev.min():.3g})")
-    if not definite and size and ev.min() < -1e-12 * scale:
-        raise ValueError(
-            f"{name} must be symmetric positive semidefinite (min eigenvalue {ev.min():.3g})"
-        )
-    return M
 
 
 def _shift(shift) -> float:
@@ -92,13 +66,13 @@ def shifted_are_feedback(A, B, shift: float = 0.2, Q=None, R=None) -> tuple[np.n
         Bad shapes/weights, or no stabilising solution exists (e.g. ``Q`` not
         detecting an unstable mode).
     """
-    A = _asm._square(A, "A")
+    A = as_square(A, "A")
     n = A.shape[0]
-    B = _asm._as_matrix(B, "B", rows=n)
+    B = as_matrix(B, "B", rows=n, vector_as="col")
     m = B.shape[1]
     s = _shift(shift)
-    Q = _sym_weight(Q, n, "Q", definite=False)
-    R = _sym_weight(R, m, "R", definite=True)
+    Q = as_symmetric(Q, n, "Q", definite=False)
+    R = as_symmetric(R, m, "R", definite=True)
     _asm.check_stabilizable(A, B, margin=s)
     As = A + s * np.eye(n)
     try:
@@ -139,9 +113,9 @@ def lyapunov_P(A_cl, Q=None) -> np.ndarray:
         If ``A_cl`` is not Hurwitz (then no positive definite ``P`` exists)
         or ``Q`` is not symmetric positive definite.
     """
-    A_cl = _asm._square(A_cl, "A_cl")
+    A_cl = as_square(A_cl, "A_cl")
     n = A_cl.shape[0]
-    Q = _sym_weight(Q, n, "Q", definite=True)
+    Q = as_symmetric(Q, n, "Q", definite=True)
     if not is_hurwitz(A_cl):
         ev = np.linalg.eigvals(A_cl)
         worst = ev[np.argmax(ev.real)]
@@ -177,9 +151,9 @@ def observer_are_gain(A, C, shift: float = 0.2, *, name: str = "(A, C)") -> np.n
     DetectabilityError
         If an unobservable eigenvalue has ``Re >= -shift``.
     """
-    A = _asm._square(A, "A")
+    A = as_square(A, "A")
     n = A.shape[0]
-    C = _asm._as_matrix(C, "C", cols=n)
+    C = as_matrix(C, "C", cols=n)
     p = C.shape[0]
     s = _shift(shift)
     _asm.check_detectable(A, C, margin=s, name=name)

@@ -46,7 +46,7 @@ of Table I. The double integrator ``x1' = x2, x2' = u, y = x1`` has
 Stability classification
 ------------------------
 Marginal modes (``Re = 0``: integrators, imaginary-axis pairs) count as *not*
-stable (:func:`~dobs_envs.design.subspaces.stable_mask`). Eigenvalues of
+stable (:func:`~dobs_envs.linalg.subspaces.stable_mask`). Eigenvalues of
 defective (Jordan) blocks are ill-conditioned: a nilpotent block of size
 ``k`` perturbed by round-off ``~1e-16`` has computed eigenvalues spread on a
 circle of radius ``~1e-16^(1/k)`` (``~5e-4`` for the paper's 5-chain of
@@ -54,7 +54,7 @@ integrators after an orthogonal change of basis), some with ``Re < -1e-8``.
 Classifying such eigenvalues one by one would call part of an integrator chain
 stable. We therefore cluster the computed eigenvalues and classify each
 cluster by its *mean*, which is well conditioned
-(:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`); the
+(:func:`~dobs_envs.linalg.subspaces.classify_stable_eigenvalues`); the
 invariant subspace is then taken from an ordered real Schur form.
 
 A cluster is a set of computed eigenvalues that a perturbation of the size of
@@ -67,7 +67,7 @@ one cluster classified by its mean -- an unstable unobserved mode was then
 called reconstructible.
 
 All rank decisions go through the SVD helpers of
-:mod:`dobs_envs.design.subspaces` with the optional absolute tolerance ``tol``
+:mod:`dobs_envs.linalg.subspaces` with the optional absolute tolerance ``tol``
 (``None``: the helpers' relative default).
 """
 from __future__ import annotations
@@ -77,7 +77,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from .subspaces import (
+from ..linalg.subspaces import (
     DEFAULT_RTOL,
     annihilator,
     classify_stable_eigenvalues,
@@ -88,6 +88,7 @@ from .subspaces import (
     subspace_intersection,
     subspace_sum,
 )
+from ..linalg.validation import as_matrix, as_square, check_tol
 
 __all__ = [
     "minimal_conditioned_invariant",
@@ -104,51 +105,9 @@ __all__ = [
 # ----------------------------------------------------------------------------
 # input validation
 # ----------------------------------------------------------------------------
-def _as_matrix(M, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(M, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real 2-D array, got {type(M).__name__}") from exc
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return arr
-
-
-def _check_A(A) -> np.ndarray:
-    A = _as_matrix(A, "A")
-    if A.shape[0] != A.shape[1] or A.shape[0] == 0:
-        raise ValueError(f"A must be square (n, n) with n >= 1, got shape {A.shape}")
-    return A
-
-
-def _check_C(C, n: int) -> np.ndarray:
-    C = _as_matrix(C, "C")
-    if C.shape[1] != n:
-        raise ValueError(f"C must have n = {n} columns (shape (p, {n})), got shape {C.shape}")
-    return C
-
-
 def _check_B(B, n: int, name: str = "B_unknown") -> np.ndarray:
-    if B is None:
-        return np.zeros((n, 0))
-    B = _as_matrix(B, name)
-    if B.shape[0] != n:
-        raise ValueError(f"{name} must have n = {n} rows (shape ({n}, m)), got shape {B.shape}")
-    return B
-
-
-def _check_tol(tol):
-    if tol is None:
-        return None
-    try:
-        t = float(tol)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"tol must be None or a positive finite float, got {tol!r}") from exc
-    if not np.isfinite(t) or t <= 0:
-        raise ValueError(f"tol must be None or a positive finite float, got {tol!r}")
-    return t
+    """``None`` (no unknown input) -> ``(n, 0)``; else a finite ``(n, m)`` matrix."""
+    return np.zeros((n, 0)) if B is None else as_matrix(B, name, rows=n)
 
 
 # ----------------------------------------------------------------------------
@@ -190,7 +149,7 @@ def minimal_conditioned_invariant(A, B, C, tol: float | None = None) -> np.ndarr
         ``p = 0`` is allowed (then ``S*`` is the reachable subspace ``<A | B>``).
     tol : float, optional
         Absolute singular-value threshold for every rank decision (``None``:
-        relative default of :func:`~dobs_envs.design.subspaces.rank_tol`).
+        relative default of :func:`~dobs_envs.linalg.subspaces.rank_tol`).
 
     Returns
     -------
@@ -202,11 +161,11 @@ def minimal_conditioned_invariant(A, B, C, tol: float | None = None) -> np.ndarr
     ValueError
         On bad shapes, NaN/inf entries or a non-positive ``tol``.
     """
-    A = _check_A(A)
+    A = as_square(A, "A", nonempty=True)
     n = A.shape[0]
     B = _check_B(B, n, "B")
-    C = _check_C(C, n)
-    return _min_cond_inv(A, B, C, _check_tol(tol))
+    C = as_matrix(C, "C", cols=n)
+    return _min_cond_inv(A, B, C, check_tol(tol))
 
 
 def _unobservable(A: np.ndarray, C: np.ndarray, tol) -> np.ndarray:
@@ -242,9 +201,9 @@ def unobservable_subspace(A, C, tol: float | None = None) -> np.ndarray:
     ndarray, shape (n, k)
         Orthonormal basis.
     """
-    A = _check_A(A)
-    C = _check_C(C, A.shape[0])
-    return _unobservable(A, C, _check_tol(tol))
+    A = as_square(A, "A", nonempty=True)
+    C = as_matrix(C, "C", cols=A.shape[0])
+    return _unobservable(A, C, check_tol(tol))
 
 
 def _unstable_subspace(M: np.ndarray) -> np.ndarray:
@@ -287,7 +246,7 @@ def unstable_subspace(M) -> np.ndarray:
     stable (``Re >= -STABILITY_TOL * max(1, |M|_2)``, marginal modes included).
 
     Eigenvalues are classified per cluster (see
-    :func:`~dobs_envs.design.subspaces.eigenvalue_clusters`) by the cluster mean, so perturbed Jordan blocks of integrators stay
+    :func:`~dobs_envs.linalg.subspaces.eigenvalue_clusters`) by the cluster mean, so perturbed Jordan blocks of integrators stay
     unstable as a whole; the subspace is read off an ordered real Schur form.
 
     Parameters
@@ -300,9 +259,7 @@ def unstable_subspace(M) -> np.ndarray:
         Orthonormal basis (``r`` = number of non-stable eigenvalues with
         algebraic multiplicity).
     """
-    M = _as_matrix(M, "M")
-    if M.shape[0] != M.shape[1]:
-        raise ValueError(f"M must be square, got shape {M.shape}")
+    M = as_square(M, "M")
     return _unstable_subspace(M)
 
 
@@ -340,9 +297,9 @@ def undetectable_subspace(A, C, tol: float | None = None) -> np.ndarray:
     ndarray, shape (n, k)
         Orthonormal basis (``k = 0`` when ``(A, C)`` is detectable).
     """
-    A = _check_A(A)
-    C = _check_C(C, A.shape[0])
-    return _undetectable(A, C, _check_tol(tol))
+    A = as_square(A, "A", nonempty=True)
+    C = as_matrix(C, "C", cols=A.shape[0])
+    return _undetectable(A, C, check_tol(tol))
 
 
 # ----------------------------------------------------------------------------
@@ -474,11 +431,11 @@ def reconstructibility_decomposition(
         tolerance (inconsistent rank decisions), or the ordered Schur form
         fails.
     """
-    A = _check_A(A)
+    A = as_square(A, "A", nonempty=True)
     n = A.shape[0]
     B = _check_B(B_unknown, n)
-    C = _check_C(C, n)
-    tol = _check_tol(tol)
+    C = as_matrix(C, "C", cols=n)
+    tol = check_tol(tol)
     p = C.shape[0]
 
     V = _min_cond_inv(A, B, C, tol)

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from .subspaces import (
+from ..linalg.subspaces import (
     annihilator,
     classify_stable_eigenvalues,
     is_hurwitz,
@@ -59,6 +59,7 @@ from .subspaces import (
     orth,
     rank_tol,
 )
+from ..linalg.validation import as_matrix, as_square
 
 __all__ = ["StrongDetectability", "strong_detectability", "lemma2_residuals", "DEFAULT_MARGIN"]
 
@@ -110,32 +111,10 @@ class StrongDetectability:
 # ---------------------------------------------------------------------------
 # validation
 # ---------------------------------------------------------------------------
-def _as_matrix(name: str, M) -> np.ndarray:
-    if np.iscomplexobj(M):
-        raise ValueError(f"{name} must be real, got a complex array")
-    try:
-        arr = np.array(M, dtype=float, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real 2-D array ({exc})") from None
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be 2-D, got an array with ndim={arr.ndim} and shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains non-finite entries (NaN or inf)")
-    return arr
-
-
 def _validate(A, B_unknown, C):
-    A = _as_matrix("A", A)
-    B = _as_matrix("B_unknown", B_unknown)
-    C = _as_matrix("C", C)
+    A = as_square(A, "A", nonempty=True)
     n = A.shape[0]
-    if A.shape != (n, n) or n == 0:
-        raise ValueError(f"A must be square and non-empty (n x n), got shape {A.shape}")
-    if B.shape[0] != n:
-        raise ValueError(f"B_unknown must have n = {n} rows (same as A), got shape {B.shape}")
-    if C.shape[1] != n:
-        raise ValueError(f"C must have n = {n} columns (same as A), got shape {C.shape}")
-    return A, B, C
+    return A, as_matrix(B_unknown, "B_unknown", rows=n), as_matrix(C, "C", cols=n)
 
 
 # ---------------------------------------------------------------------------
@@ -288,7 +267,7 @@ def strong_detectability(
         Absolute singular-value threshold for every rank decision. It is
         applied to the internally normalised data (``A / ||A||_2``, orthonormal
         bases of ``Im B_unknown`` and of the row space of ``C``), so it is
-        unit-free. Default: :func:`~dobs_envs.design.subspaces.rank_tol`.
+        unit-free. Default: :func:`~dobs_envs.linalg.subspaces.rank_tol`.
     margin : float, optional
         Requested stability margin of the assignable part of ``E`` (in the time
         unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
@@ -316,11 +295,11 @@ def strong_detectability(
     -----
     Steps 1-6 follow the Appendix, with ``Phi_j, Psi_j`` from SVDs
     (:func:`_rank_factor`, ``Psi_j`` orthogonal) and every ``Xi_j`` an
-    orthonormal annihilator (:func:`~dobs_envs.design.subspaces.annihilator`).
+    orthonormal annihilator (:func:`~dobs_envs.linalg.subspaces.annihilator`).
     Step 6 (Wonham's detectability decomposition of ``(Pi_3, Pi_4)``): the
     undetectable subspace is the part of the unobservable subspace of
     ``(Pi_3, Pi_4)`` belonging to eigenvalues with ``Re >= 0`` (marginal modes
-    count as *not* stable, :func:`~dobs_envs.design.subspaces.stable_mask`;
+    count as *not* stable, :func:`~dobs_envs.linalg.subspaces.stable_mask`;
     eigenvalues of defective blocks are classified by cluster mean); ``P_Pi``
     is orthogonal, ``r_d`` is the dimension of the detectable quotient.
     Step 8 uses a QR factorisation (Gram-Schmidt) and triangular solves.
@@ -369,7 +348,7 @@ def strong_detectability(
        harmless; ``E, F, G`` are mapped back exactly.
     3. Marginal eigenvalues of ``Pi_3`` on its unobservable subspace count as
        undetectable; defective eigenvalues are classified by cluster mean
-       (:func:`~dobs_envs.design.subspaces.classify_stable_eigenvalues`),
+       (:func:`~dobs_envs.linalg.subspaces.classify_stable_eigenvalues`),
        since e.g. the NE2 integrator chains give computed eigenvalues with
        ``|Re| ~ 1e-3``. Clusters are pseudospectral components (eigenvalues a
        backward error of the eigensolver could merge), not a radius relative

@@ -36,9 +36,10 @@ from threadpoolctl import threadpool_limits
 
 from .. import assumptions as _asm
 from ..graphs import Graph, as_graph
+from ..linalg.subspaces import is_hurwitz, numerical_rank
+from ..linalg.validation import as_matrix, as_square
 from .gains import observer_are_gain
 from .lemma2 import StrongDetectability, lemma2_residuals, strong_detectability
-from .subspaces import is_hurwitz, numerical_rank
 
 __all__ = [
     "ObserverDesign",
@@ -190,32 +191,6 @@ def observer_residuals(design: ObserverDesign) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # boundary validation
 # ---------------------------------------------------------------------------
-def _matrix(M, name: str, rows: int | None = None, cols: int | None = None,
-            vector_as: str | None = None) -> np.ndarray:
-    """Copy ``M`` to a finite float 2-D array, checking the expected shape.
-
-    ``vector_as`` = ``"col"``/``"row"`` accepts a 1-D vector as one column/row.
-    """
-    try:
-        arr = np.array(M, dtype=float, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real numeric array ({exc})") from None
-    if arr.ndim == 1 and vector_as == "col":
-        arr = arr.reshape(-1, 1)
-    elif arr.ndim == 1 and vector_as == "row":
-        arr = arr.reshape(1, -1)
-    elif arr.ndim == 0 and vector_as is not None:
-        arr = arr.reshape(1, 1)
-    exp = f"({rows if rows is not None else '*'}, {cols if cols is not None else '*'})"
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array of shape {exp}, got shape {arr.shape}")
-    if (rows is not None and arr.shape[0] != rows) or (cols is not None and arr.shape[1] != cols):
-        raise ValueError(f"{name} must have shape {exp}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return arr
-
-
 def _check_full_row_rank(C: np.ndarray, name: str) -> None:
     if C.shape[0] == 0:
         raise ValueError(f"{name} has no rows: every observer node needs a measurement y_i = C_i x")
@@ -356,16 +331,14 @@ def design_distributed_observer(
     CollectiveDetectabilityError
         Assumption 6 fails (``sum_i Im T_id != R^n``).
     """
-    A = _matrix(A, "A")
+    A = as_square(A, "A", nonempty=True)
     n = A.shape[0]
-    if A.shape != (n, n) or n == 0:
-        raise ValueError(f"A must be a non-empty square (n, n) array, got shape {A.shape}")
     if isinstance(channels, np.ndarray) and channels.ndim == 2:
         raise ValueError(
             "channels must be a sequence of (n, m_k) blocks B^k, not one matrix; "
             "pass e.g. [B[:, [k]] for k in range(m)]"
         )
-    chans = [_matrix(b, f"channels[{k}]", rows=n, vector_as="col") for k, b in enumerate(channels)]
+    chans = [as_matrix(b, f"channels[{k}]", rows=n, vector_as="col") for k, b in enumerate(channels)]
     K = len(chans)
     slices, start = [], 0
     for b in chans:
@@ -373,11 +346,11 @@ def design_distributed_observer(
         start += b.shape[1]
     B = np.hstack(chans) if chans else np.zeros((n, 0))
     m = B.shape[1]
-    B_v = np.zeros((n, 0)) if B_v is None else _matrix(B_v, "B_v", rows=n, vector_as="col")
+    B_v = np.zeros((n, 0)) if B_v is None else as_matrix(B_v, "B_v", rows=n, vector_as="col")
 
     if isinstance(C, np.ndarray) and C.ndim == 2:
         raise ValueError("C must be a sequence of per-node (p_i, n) matrices, not one matrix")
-    C_list = [_matrix(Ci, f"C[{i}] (node {i})", cols=n, vector_as="row") for i, Ci in enumerate(C)]
+    C_list = [as_matrix(Ci, f"C[{i}] (node {i})", cols=n, vector_as="row") for i, Ci in enumerate(C)]
     N = len(C_list)
     if N == 0:
         raise ValueError("C must contain at least one node's output matrix")
@@ -473,12 +446,10 @@ def design_mas_observer(agents: Sequence, graph, *, shift: float = 0.2, L: Seque
             a, b, c = ag
         except (TypeError, ValueError):
             raise ValueError(f"agents[{i}] must be a triple (A_i, B_i, C_i)") from None
-        a = _matrix(a, f"agents[{i}] A_i", vector_as="row")
+        a = as_square(a, f"agents[{i}] A_i", nonempty=True, vector_as="row")
         ni = a.shape[0]
-        if a.shape != (ni, ni) or ni == 0:
-            raise ValueError(f"agents[{i}] A_i must be a non-empty square (n_i, n_i) array, got {a.shape}")
-        b = _matrix(b, f"agents[{i}] B_i", rows=ni, vector_as="col")
-        c = _matrix(c, f"agents[{i}] C_i", cols=ni, vector_as="row")
+        b = as_matrix(b, f"agents[{i}] B_i", rows=ni, vector_as="col")
+        c = as_matrix(c, f"agents[{i}] C_i", cols=ni, vector_as="row")
         _check_full_row_rank(c, f"agents[{i}] C_i")
         Ai.append(a), Bi.append(b), Ci.append(c)
     g = _graph_for(graph, N)
@@ -507,7 +478,7 @@ def design_mas_observer(agents: Sequence, graph, *, shift: float = 0.2, L: Seque
         if L is None:
             Li = observer_are_gain(Ai[i], Ci[i], shift, name=name)  # NE1
         else:
-            Li = _matrix(L[i], f"L[{i}]", rows=n_i[i], cols=Ci[i].shape[0], vector_as="col")
+            Li = as_matrix(L[i], f"L[{i}]", rows=n_i[i], cols=Ci[i].shape[0], vector_as="col")
             if not is_hurwitz(Ai[i] + Li @ Ci[i]):
                 raise ValueError(f"L[{i}]: A_i + L_i C_i of {name} is not Hurwitz")
         E.append(Ai[i] + Li @ Ci[i])

@@ -292,7 +292,7 @@ class DObsParallelEnv(ParallelEnv):
         (:mod:`baselines.paper`, at this env's control period) over ``episodes`` initial states of the
         default distribution (fixed calibration seed 12345), simulated for ``min(horizon, max_seconds)``;
         at least 1 per component. Deterministic for a given scenario and options."""
-        from dobs_envs.reproduce import paper_policy
+        from ..control import paper_policy
 
         sc, p = self.scenario, self.params
         rng = np.random.default_rng(12345)
@@ -525,13 +525,16 @@ class DObsParallelEnv(ParallelEnv):
         self._features()
         self._reward = -self._shaped_cost(self._cost) * self.control_period
         nx = self._x_norm
-        if not math.isfinite(nx):
+        if not self._finite:  # some entry of x, x_r, z, gamma, gamma_s or v is NaN/inf (kernel flag)
             self._terminated, self._reason = True, "non_finite_state"
         elif nx > self.state_bound:
             self._terminated, self._reason = True, "state_bound_exceeded"
         else:
             self._terminated, self._reason = False, None
         if self._terminated:
+            # clean terminal observations/state(): NaN -> 0, +-inf -> +-largest finite of the dtype
+            np.nan_to_num(self._obs_all, copy=False)
+            np.nan_to_num(self._f, copy=False)
             if not math.isfinite(self._reward):
                 self._reward = -self._bound_step_cost
             if self.termination_penalty:
@@ -546,7 +549,7 @@ class DObsParallelEnv(ParallelEnv):
         from the current state in one compiled call."""
         s = self._sim
         out = np.empty(self._obs_len, self.obs_dtype)
-        cost, self._track_err, self._x_norm = write_features_packed(
+        cost, self._track_err, self._x_norm, self._finite = write_features_packed(
             s.x, s.z, s.x_r, s.gamma, s.gamma_s, s.v, float(s.t[0]), self._W, self._SF, self._SI,
             self.has_reference, out)
         self._cost = cost

@@ -16,18 +16,19 @@ and shares its core (no per-step dict round trip):
   ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,), ``gamma_s`` (N,),
   and ``termination_reason`` when the episode terminated.
 
-Registered ids (:mod:`dobs_envs`; ``gym.make`` adds a ``TimeLimit`` of
-``max_episode_steps`` control steps, and the wrapped environment then never
+Registered ids (one per entry of :mod:`dobs_envs.registry`; ``gym.make`` adds a
+``TimeLimit`` of ``max_episode_steps`` control steps, the default scenario's
+``t_end`` over the default control period, and the wrapped environment then never
 truncates by itself -- there is a single truncation mechanism):
 
-=================================  ==============================  ==================
-id                                 parallel env                    max_episode_steps
-=================================  ==============================  ==================
-``dobs_envs/Tracking-v0``          ``tracking_v0``                 400 (20 s)
-``dobs_envs/DisturbanceRejection-v0`` ``disturbance_rejection_v0`` 400 (20 s)
-``dobs_envs/HeteroMAS-v0``         ``hetero_mas_v0``               600 (30 s)
-``dobs_envs/RandomNetwork-v0``     ``random_network_v0``           400 (20 s)
-=================================  ==============================  ==================
+=====================================  ============================  =================
+id                                     parallel env                  max_episode_steps
+=====================================  ============================  =================
+``dobs_envs/Tracking-v0``              ``tracking_v0``               400 (20 s)
+``dobs_envs/DisturbanceRejection-v0``  ``disturbance_rejection_v0``  400 (20 s)
+``dobs_envs/HeteroMAS-v0``             ``hetero_mas_v0``             600 (30 s)
+``dobs_envs/RandomNetwork-v0``         ``random_network_v0``         400 (20 s)
+=====================================  ============================  =================
 
 (seconds at the default control period 0.05 s; with other ``dt``/``substeps``
 pass ``max_episode_steps=`` to ``gym.make``). ``max_cycles``/``horizon`` are
@@ -45,9 +46,9 @@ from gymnasium import spaces
 from .base import DObsParallelEnv
 from .observation import clip_inplace
 
-__all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS"]
+from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 
-from .. import GYM_IDS  # noqa: E402  (the registration table, defined without heavy imports)
+__all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS"] + [f"make_{name}" for name in ENVIRONMENTS]
 
 
 class CentralizedEnv(gym.Env):
@@ -146,7 +147,8 @@ def make_gym_env(scenario, **options) -> CentralizedEnv:
     return CentralizedEnv(DObsParallelEnv(scenario=scenario, **options))
 
 
-def _gym_entry(cls_path: str):
+def _gym_entry(entry: EnvEntry):
+    """The Gymnasium entry point ``make_<name>`` of a registry entry (no own truncation: ``TimeLimit`` only)."""
     def make(**kwargs):
         for k in ("max_cycles", "horizon"):
             if k in kwargs:
@@ -154,16 +156,14 @@ def _gym_entry(cls_path: str):
                     f"{k!r} is not an option of the registered Gymnasium environments: the episode length is "
                     f"gym.make(..., max_episode_steps=N) (a TimeLimit wrapper, in control steps)"
                 )
-        import importlib
+        return CentralizedEnv(entry.load_class()(horizon=math.inf, **kwargs))
 
-        mod, name = cls_path.rsplit(".", 1)
-        cls = getattr(importlib.import_module(mod), name)
-        return CentralizedEnv(cls(horizon=math.inf, **kwargs))
-
+    make.__name__ = make.__qualname__ = f"make_{entry.name}"
+    make.__doc__ = f"``gym.make({entry.gym_id!r})``: :class:`CentralizedEnv` over ``{entry.entry_point}``."
     return make
 
 
-make_tracking = _gym_entry("dobs_envs.envs.tracking.TrackingEnv")
-make_disturbance_rejection = _gym_entry("dobs_envs.envs.disturbance.DisturbanceRejectionEnv")
-make_hetero_mas = _gym_entry("dobs_envs.envs.hetero_mas.HeteroMASEnv")
-make_random_network = _gym_entry("dobs_envs.envs.random_network.RandomNetworkEnv")
+# make_tracking, make_disturbance_rejection, ...: the entry points of GYM_IDS
+for _entry in ENVIRONMENTS.values():
+    globals()[f"make_{_entry.name}"] = _gym_entry(_entry)
+del _entry

@@ -70,7 +70,9 @@ class HeteroMASEnv(DObsParallelEnv):
 
     ## Episode End
 
-    Terminated when ``||x|| > state_bound`` (1e3); truncated after ``max_cycles``
+    Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
+    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
+    observations); truncated after ``max_cycles``
     (default 600 control steps = NE1's 30 s).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per

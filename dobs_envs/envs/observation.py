@@ -6,7 +6,8 @@ holding everything any agent may observe::
     f = [ y (sum_i p_i) | xhat_0..xhat_{N-1} (N n) | x (n) | x_r (n) | gamma (N) | gamma_s (N)
           | v (m_v) | r (m) | t (1) | e (n) | 0 (1) | 1 (1) ]
 
-(written by one compiled call, :func:`write_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
+(written by one compiled call, :func:`write_features`; readable numpy reference in
+:mod:`dobs_envs.envs.numpy_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
 gather, which also copies). Padding entries point at the constant 0, mask
 entries at the constant 1 (or 0 for padding). This keeps the per-step cost at
 one gather per agent whatever components are selected.
@@ -40,7 +41,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace"]
+__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace",
+           "pack_static", "unpack_static", "write_features_packed"]
 
 COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
 LOCAL = ("y", "xhat", "neighbors", "mask", "r")
@@ -164,7 +166,7 @@ class FeatureLayout:
 try:
     import numba as _numba
 
-    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)
+    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)  # no fast-math: the finiteness test must see NaN/inf
 except ImportError:  # pragma: no cover
     def _njit(f):
         return f
@@ -180,12 +182,15 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
     amplitude, frequency, phase of ``r(t)``. Writes ``est[i] = ||xhat_i - x||``.
     Then gathers ``out[j] = f[idx[j]]`` (all agents' observations, concatenated; ``out`` is
     a fresh array of the observation dtype).
-    Returns ``(e'Qe + u'Ru, ||e||, ||x||)`` with ``e = x - x_r`` (``has_ref``) or ``x``.
+    Returns ``(e'Qe + u'Ru, ||e||, ||x||, finite)`` with ``e = x - x_r`` (``has_ref``) or ``x``
+    and ``finite`` True iff every entry of ``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s`` and ``v``
+    is finite (accumulated as ``sum(value * 0)``, which is 0 exactly when all are finite).
     Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``, ``xhat_i = z_i + G_i y_i``.
     """
     N, n = z.shape[1], z.shape[2]
     p = C.shape[1]
     y = np.empty(p)
+    nonfin = 0.0  # stays 0.0 iff all state entries are finite (inf * 0 and NaN * 0 are NaN)
     oy = off[0]
     oxh = off[1]
     for i in range(N):
@@ -203,7 +208,9 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
             s = 0.0
             for q in range(p):
                 s += G[i, k, q] * y[q]
-            xh = z[0, i, k] + s
+            zk = z[0, i, k]
+            nonfin += zk * 0.0
+            xh = zk + s
             f[oxh + i * n + k] = xh
             d = xh - x[0, k]
             ss += d * d
@@ -214,14 +221,17 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
         f[off[2] + k] = x[0, k]
         f[off[3] + k] = x_r[0, k]
         xx += x[0, k] * x[0, k]
+        nonfin += x[0, k] * 0.0 + x_r[0, k] * 0.0
         e = x[0, k] - x_r[0, k] if has_ref else x[0, k]
         f[off[9] + k] = e
         ee += e * e
     for i in range(N):
         f[off[4] + i] = gamma[0, i]
         f[off[5] + i] = gamma_s[0, i]
+        nonfin += gamma[0, i] * 0.0 + gamma_s[0, i] * 0.0
     for j in range(v.shape[1]):
         f[off[6] + j] = v[0, j]
+        nonfin += v[0, j] * 0.0
     m = ref.shape[1]
     if has_ref:
         for j in range(m):
@@ -242,7 +252,7 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, 
         cost += u[k] * s
     for j in range(idx.shape[0]):
         out[j] = f[idx[j]]
-    return cost, np.sqrt(ee), np.sqrt(xx)
+    return cost, np.sqrt(ee), np.sqrt(xx), nonfin == 0.0
 
 
 @_njit
@@ -272,9 +282,13 @@ def pack_static(C, G, ref, Q, R, off, idx, F):
 
 
 @_njit
-def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
-    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
-    ``SF``/``SI`` from :func:`pack_static`."""
+def unpack_static(SF, SI):
+    """Views of the static arrays packed by :func:`pack_static`.
+
+    Returns ``(F, C (N, p, n), G (N, n, p), ref (3, m), Q (n, n), R (m, m), off, idx)``
+    with ``F`` the feature-vector length, ``off`` the offsets of
+    :func:`write_features` and ``idx`` the concatenated agent gathers.
+    """
     F, N, p, n, m, mr, no, ni = SI[0], SI[1], SI[2], SI[3], SI[4], SI[5], SI[6], SI[7]
     a = 0
     C = SF[a:a + N * p * n].reshape((N, p, n)); a += N * p * n
@@ -284,5 +298,15 @@ def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, o
     R = SF[a:a + m * m].reshape((m, m))
     off = SI[8:8 + no]
     idx = SI[8 + no:8 + no + ni]
+    return F, C, G, ref, Q, R, off, idx
+
+
+@_njit
+def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
+    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
+    ``SF``/``SI`` from :func:`pack_static`. Readable reference:
+    :func:`dobs_envs.envs.numpy_features.write_features_reference` (same signature)."""
+    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    N, m = C.shape[0], R.shape[0]
     return write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, W[:F], off, W[F:F + N], Q, R,
                           W[F + N:F + N + m], idx, out)

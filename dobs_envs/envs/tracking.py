@@ -79,10 +79,15 @@ class TrackingEnv(DObsParallelEnv):
 
     ## Episode End
 
-    Terminated when ``||x|| > state_bound`` (1e3) or ``x`` is not finite
-    (``info[agent]["termination_reason"]``); truncated after ``max_cycles``
-    control steps (default 400 = the paper's 20 s at the default 0.05 s control
-    period; ``horizon=`` in seconds instead).
+    Terminated when ``||x|| > state_bound`` (1e3) or any simulated quantity
+    (``x``, ``x_r``, the observer states ``z``, ``gamma``, ``gamma_s``, ``v``) is
+    not finite (``info[agent]["termination_reason"]`` = ``"state_bound_exceeded"`` /
+    ``"non_finite_state"``). The terminal step's observations and ``state()`` are
+    cleaned (NaN -> 0, +-inf -> +-largest finite value of ``obs_dtype``), a non-finite
+    step cost is replaced by the cost of one step on the bound, and ``info`` keeps the
+    raw diagnostics (errors and gains may be NaN/inf).
+    Truncated after ``max_cycles`` control steps (default 400 = the paper's 20 s
+    at the default 0.05 s control period; ``horizon=`` in seconds instead).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
     remaining control step (``termination_penalty=False`` disables it), so ending an

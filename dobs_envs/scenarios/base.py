@@ -26,26 +26,19 @@ from typing import Optional
 import numpy as np
 
 from ..graphs import Graph, as_graph
+from ..linalg.validation import as_array, as_symmetric
 from ..sim.state import SimParams
 from .signals import Sinusoids
 
 __all__ = ["Scenario", "CONTROLLERS"]
 
-#: Controllers a scenario can name as its paper reference (see baselines.paper).
+#: Controllers a scenario can name as its paper reference (see dobs_envs.control.laws).
 CONTROLLERS = ("open_loop", "feedback", "tracking", "sliding_mode", "adaptive_sliding_mode")
 
 
 def _ro(a, name, shape=None, ndim=None):
-    try:
-        arr = np.array(a, dtype=float, copy=True)
-    except (TypeError, ValueError):
-        raise ValueError(f"Scenario.{name} must be a numeric array, got {type(a).__name__}") from None
-    if ndim is not None and arr.ndim != ndim:
-        raise ValueError(f"Scenario.{name} must be {ndim}-D, got shape {arr.shape}")
-    if shape is not None and arr.shape != shape:
-        raise ValueError(f"Scenario.{name} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"Scenario.{name} contains NaN or inf")
+    """Validated read-only float64 copy (:func:`~dobs_envs.linalg.validation.as_array`)."""
+    arr = as_array(a, f"Scenario.{name}", shape=shape, ndim=ndim)
     arr.flags.writeable = False
     return arr
 
@@ -64,16 +57,8 @@ def _index(v, name) -> int:
 
 
 def _sym(M: np.ndarray, name: str, definite: bool) -> np.ndarray:
-    """Check that the read-only ``M`` is symmetric PSD (PD if ``definite``)."""
-    scale = max(1.0, float(np.abs(M).max())) if M.size else 1.0
-    if M.size and np.abs(M - M.T).max() > 1e-10 * scale:
-        raise ValueError(f"Scenario.{name} must be symmetric, max |{name} - {name}^T| = {np.abs(M - M.T).max():.3g}")
-    if M.size:
-        ev = np.linalg.eigvalsh(0.5 * (M + M.T)).min()
-        if definite and ev <= 1e-12 * scale:
-            raise ValueError(f"Scenario.{name} must be positive definite, min eigenvalue {ev:.3g}")
-        if not definite and ev < -1e-10 * scale:
-            raise ValueError(f"Scenario.{name} must be positive semidefinite, min eigenvalue {ev:.3g}")
+    """Check that the read-only ``M`` is symmetric PSD (PD if ``definite``); returns ``M`` itself."""
+    as_symmetric(M, M.shape[0], f"Scenario.{name}", definite=definite)
     return M
 
 

@@ -56,8 +56,8 @@ from scipy.linalg import block_diag
 
 from .. import assumptions as _asm
 from ..design.gains import lyapunov_P, shifted_are_feedback
-from ..design.subspaces import is_hurwitz
 from ..graphs import Graph, as_graph, complete_graph, path_graph, random_connected_graph, ring_graph, star_graph
+from ..linalg.subspaces import is_hurwitz
 from .base import CONTROLLERS, Scenario
 from .signals import Sinusoids
 

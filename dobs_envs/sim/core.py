@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..linalg.validation import as_array
 from .kernel import HAVE_NUMBA, control_period_compiled
 from .numpy_step import control_period_numpy
 from .state import SimParams, SimState
@@ -20,13 +21,12 @@ BACKENDS = ("numba", "numpy")
 
 
 def _check_input(name, a, batch, width):
-    a = np.asarray(a, dtype=np.float64)
+    """Finite real ``(batch, width)`` float64 copy of ``a`` (a 1-D ``a`` is one batch row)."""
+    a = as_array(a, name)
     if a.ndim == 1:
         a = a[None]
     if a.shape != (batch, width):
         raise ValueError(f"{name} must have shape ({batch}, {width}) (batch, inputs), got {np.shape(a)}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} contains NaN or inf")
     return a
 
 

@@ -15,11 +15,15 @@ The simulated system is
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ["SimState", "SimParams"]
+from ..linalg.validation import as_array
+
+__all__ = ["SimState", "SimParams", "KernelArgs"]
 
 
 def _ro(a, shape=None) -> np.ndarray:
@@ -74,6 +78,42 @@ def _neighbour_lists(adj: np.ndarray):
         idx[i, : len(nb)] = nb
         wts[i, : len(nb)] = adj[i, nb]
     return idx, wts
+
+
+class KernelArgs(NamedTuple):
+    """The constants of one control period as the compiled kernel receives them.
+
+    One named structure built once per :class:`SimParams`
+    (:attr:`SimParams.kernel_args`) and passed as a single argument:
+    ``_control_period(x, z, gamma, gamma_s, v, x_r, u, r, args)``. All arrays
+    are the read-only, C-contiguous arrays of the :class:`SimParams`.
+    The kernel receives it as a plain tuple (:attr:`SimParams.kernel_tuple`,
+    same field order) and unpacks it in one statement: numba dispatches a
+    plain tuple ~1.3 us faster per call than a NamedTuple.
+    """
+
+    A: np.ndarray  # (n, n) plant, eq. (LTIsys)
+    B: np.ndarray  # (n, m)
+    B_v: np.ndarray  # (n, m_v)
+    C: np.ndarray  # (N, p, n) node outputs, zero-padded rows (eq. localmeasure)
+    E_bar: np.ndarray  # (N, n, n) eq. (barEFGB)
+    F_bar: np.ndarray  # (N, n, p)
+    G_bar: np.ndarray  # (N, n, p)
+    B_bar: np.ndarray  # (N, n, m)
+    Q_proj: np.ndarray  # (N, n, r) thin basis of Im T_iu (proj_range) or of Im T_id
+    proj_range: np.ndarray  # (N,) bool: P_u,i = Q Q^T (True) or I - Q Q^T (False)
+    nbr_idx: np.ndarray  # (N, max degree) int64 neighbour indices (padding: weight 0)
+    nbr_w: np.ndarray  # (N, max degree) edge weights a_ij
+    degree: np.ndarray  # (N,) sum_j a_ij
+    A_r: np.ndarray  # (n, n) reference model A + B K (zeros without reference), eq. (refxdy)
+    phi: np.ndarray  # (N,) eq. (gammaiis) step sizes
+    phi_s: np.ndarray  # (N,)
+    sigma: np.ndarray  # (N,) eq. (gagasbeta) leakage
+    sigma_s: np.ndarray  # (N,)
+    Phi_v: np.ndarray  # (m_v, m_v) expm(S_v dt)
+    dt: float  # Euler step (s)
+    substeps: int  # Euler steps per control period
+    has_reference: bool
 
 
 @dataclass(frozen=True)
@@ -167,6 +207,22 @@ class SimParams:
     def control_period(self) -> float:
         return self.dt * self.substeps
 
+    @cached_property
+    def kernel_args(self) -> KernelArgs:
+        """The kernel's constants as one :class:`KernelArgs` (built on first use, then cached)."""
+        return KernelArgs(
+            A=self.A, B=self.B, B_v=self.B_v, C=self.C, E_bar=self.E_bar, F_bar=self.F_bar, G_bar=self.G_bar,
+            B_bar=self.B_bar, Q_proj=self.Q_proj, proj_range=self.proj_range, nbr_idx=self.nbr_idx,
+            nbr_w=self.nbr_w, degree=self.degree, A_r=self.A_r, phi=self.phi, phi_s=self.phi_s,
+            sigma=self.sigma, sigma_s=self.sigma_s, Phi_v=self.Phi_v, dt=float(self.dt),
+            substeps=int(self.substeps), has_reference=bool(self.has_reference),
+        )
+
+    @cached_property
+    def kernel_tuple(self) -> tuple:
+        """:attr:`kernel_args` as a plain tuple (what the compiled kernel is called with)."""
+        return tuple(self.kernel_args)
+
     @classmethod
     def from_design(
         cls,
@@ -253,13 +309,11 @@ class SimParams:
     def initial_state(self, x0, *, z0=None, gamma0=0.1, gamma_s0=0.1, v0=None, x_r0=None, t0=0.0) -> SimState:
         """Batched initial state. ``x0`` is (n,) or (B, n); ``z0`` defaults to 0 (paper)."""
         n, N, m_v = self.n_states, self.n_nodes, self.n_unknown
-        x0 = np.array(x0, dtype=float, copy=True)
+        x0 = as_array(x0, "x0")
         if x0.ndim == 1:
             x0 = x0[None]
         if x0.ndim != 2 or x0.shape[1] != n:
             raise ValueError(f"x0 must have shape ({n},) or (batch, {n}), got {x0.shape}")
-        if not np.all(np.isfinite(x0)):
-            raise ValueError("x0 contains NaN or inf")
         Bsz = x0.shape[0]
 
         def batched(name, val, shape):

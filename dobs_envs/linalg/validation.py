@@ -1,0 +1,168 @@
+"""The matrix validators of the package: one place for shape/finite/real checks.
+
+Every function copies its input to a fresh float64 array and raises
+``ValueError`` whose message starts with the argument's name (``name``), so
+callers report *which* argument is wrong, e.g. ``"B must have shape (9, *)
+(9 rows), got shape (8, 1)"``. Inputs are never modified.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["as_array", "as_matrix", "as_square", "as_symmetric", "check_tol"]
+
+#: Relative tolerance of :func:`as_symmetric`: ``max |M - M^T| <= SYM_RTOL * max(1, max |M|)``.
+SYM_RTOL = 1e-10
+#: Definiteness tolerances of :func:`as_symmetric`, relative to ``max(1, max |M|)``:
+#: positive definite needs ``lambda_min > PD_RTOL``, semidefinite ``lambda_min >= -PSD_RTOL``.
+PD_RTOL = 1e-12
+PSD_RTOL = 1e-10
+
+
+def as_array(a, name: str, *, shape: tuple | None = None, ndim: int | None = None) -> np.ndarray:
+    """Finite real float64 copy of ``a``.
+
+    Parameters
+    ----------
+    a : array_like
+    name : str
+        Argument name used in error messages.
+    shape : tuple of int, optional
+        Required exact shape.
+    ndim : int, optional
+        Required number of dimensions.
+
+    Returns
+    -------
+    ndarray, float64 (a copy)
+
+    Raises
+    ------
+    ValueError
+        Complex, non-numeric, wrong ``ndim``/``shape``, or NaN/inf entries.
+    """
+    if np.iscomplexobj(a):
+        raise ValueError(f"{name} must be real, got a complex array")
+    try:
+        arr = np.array(a, dtype=np.float64, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a real numeric array ({exc})") from None
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-D, got shape {arr.shape}")
+    if shape is not None and arr.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+def as_matrix(M, name: str, *, rows: int | None = None, cols: int | None = None,
+              vector_as: str | None = None) -> np.ndarray:
+    """Finite real float64 2-D copy of ``M`` with optional row/column counts.
+
+    Parameters
+    ----------
+    M : array_like
+    name : str
+        Argument name used in error messages.
+    rows, cols : int, optional
+        Required number of rows / columns.
+    vector_as : {None, "col", "row"}
+        Accept a 1-D vector as one column (``(k,) -> (k, 1)``) or one row
+        (``(k,) -> (1, k)``), and a scalar as ``(1, 1)``; ``None`` rejects them.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols), float64 (a copy)
+
+    Raises
+    ------
+    ValueError
+        Complex or non-numeric entries, not 2-D, wrong rows/columns, NaN/inf.
+    """
+    if vector_as not in (None, "col", "row"):
+        raise ValueError(f"vector_as must be None, 'col' or 'row', got {vector_as!r}")
+    arr = as_array(M, name)
+    if vector_as is not None and arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    elif vector_as == "col" and arr.ndim == 1:
+        arr = arr.reshape(-1, 1)
+    elif vector_as == "row" and arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    exp = f"({'*' if rows is None else rows}, {'*' if cols is None else cols})"
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D array of shape {exp}, got shape {arr.shape}")
+    if rows is not None and arr.shape[0] != rows:
+        raise ValueError(f"{name} must have shape {exp} ({rows} rows), got shape {arr.shape}")
+    if cols is not None and arr.shape[1] != cols:
+        raise ValueError(f"{name} must have shape {exp} ({cols} columns), got shape {arr.shape}")
+    return arr
+
+
+def as_square(A, name: str = "A", *, nonempty: bool = False, vector_as: str | None = None) -> np.ndarray:
+    """Finite real float64 square copy of ``A``, shape (n, n) (``n >= 1`` if ``nonempty``).
+
+    Raises ``ValueError`` naming ``name`` (see :func:`as_matrix`).
+    """
+    A = as_matrix(A, name, vector_as=vector_as)
+    if A.shape[0] != A.shape[1] or (nonempty and A.shape[0] == 0):
+        what = "a non-empty square" if nonempty else "a square"
+        raise ValueError(f"{name} must be {what} (n, n) matrix, got shape {A.shape}")
+    return A
+
+
+def as_symmetric(M, size: int, name: str, *, definite: bool) -> np.ndarray:
+    """Symmetric positive (semi)definite ``(size, size)`` copy of ``M`` (weights Q, R, P).
+
+    ``M = None`` gives the identity; a scalar is accepted when ``size == 1``.
+    The result is symmetrised exactly (``(M + M^T) / 2``).
+
+    Parameters
+    ----------
+    M : array_like or None
+    size : int
+    name : str
+        Argument name used in error messages.
+    definite : bool
+        Positive definite (True) or semidefinite (False), with the relative
+        tolerances :data:`PD_RTOL` / :data:`PSD_RTOL`.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/inf, asymmetric (beyond :data:`SYM_RTOL`), or not
+        positive (semi)definite.
+    """
+    if M is None:
+        return np.eye(size)
+    M = as_array(M, name)
+    if M.ndim == 0 and size == 1:
+        M = M.reshape(1, 1)
+    if M.shape != (size, size):
+        raise ValueError(f"{name} must have shape ({size}, {size}), got {M.shape}")
+    if not size:
+        return M
+    scale = max(1.0, float(np.abs(M).max()))
+    asym = float(np.abs(M - M.T).max())
+    if asym > SYM_RTOL * scale:
+        raise ValueError(f"{name} must be symmetric, max |{name} - {name}^T| = {asym:.3g}")
+    M = 0.5 * (M + M.T)
+    ev = float(np.linalg.eigvalsh(M).min())
+    if definite and ev <= PD_RTOL * scale:
+        raise ValueError(f"{name} must be symmetric positive definite (min eigenvalue {ev:.3g})")
+    if not definite and ev < -PSD_RTOL * scale:
+        raise ValueError(f"{name} must be symmetric positive semidefinite (min eigenvalue {ev:.3g})")
+    return M
+
+
+def check_tol(tol, name: str = "tol") -> float | None:
+    """``None`` or a positive finite float (an absolute SVD threshold)."""
+    if tol is None:
+        return None
+    try:
+        t = float(tol)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be None or a positive finite float, got {tol!r}") from None
+    if not np.isfinite(t) or t <= 0:
+        raise ValueError(f"{name} must be None or a positive finite float, got {tol!r}")
+    return t
