@@ -289,7 +289,7 @@ class DObsParallelEnv(ParallelEnv):
 
     def _auto_action_bound(self, episodes: int = 8, max_seconds: float = 10.0, margin: float = 2.0):
         """Calibrated bounds: ``margin`` x the largest ``|u_j|`` of the scenario's paper controller
-        (:mod:`baselines.paper`, at this env's control period) over ``episodes`` initial states of the
+        (:mod:`dobs_envs.control.laws`, at this env's control period) over ``episodes`` initial states of the
         default distribution (fixed calibration seed 12345), simulated for ``min(horizon, max_seconds)``;
         at least 1 per component. Deterministic for a given scenario and options."""
         from ..control import paper_policy
