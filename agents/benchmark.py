@@ -71,6 +71,7 @@ AGENTS = {
     "td3": AgentSpec("td3", False, None, "TD3 (centralised)"),
     "sac_ma": AgentSpec("sac", True, None, "SAC (shared, per node)"),
     "ppo_log": AgentSpec("ppo", False, None, "PPO (centralised, log-cost training)", (("reward", "log"),)),
+    "ppo_sqrt": AgentSpec("ppo", False, None, "PPO (centralised, sqrt-cost training)", (("reward", "sqrt"),)),
     "ppo_res": AgentSpec("ppo", False, "residual", "residual PPO (centralised) [hybrid]"),
     "ppo_res_ma": AgentSpec("ppo", True, "residual", "residual PPO (shared) [hybrid]"),
     "ppo_bc": AgentSpec("ppo", False, "bc", "BC-warm-started PPO (centralised) [hybrid]"),
@@ -87,13 +88,14 @@ BUDGETS = {
     },
     "quick": {
         "episodes": 10, "seeds": 3, "env_kwargs": {}, "curve_points": 6, "curve_episodes": 3,
-        "agents": {"ppo": 300_000, "ppo_ma": 150_000, "ppo_res": 150_000, "ppo_bc": 150_000},
+        "agents": {"ppo": 400_000, "ppo_ma": 120_000, "ppo_res": 150_000, "ppo_bc": 150_000},
         "hyperparams": {},
     },
     "full": {
         "episodes": 20, "seeds": 10, "env_kwargs": {}, "curve_points": 10, "curve_episodes": 5,
-        "agents": {"ppo": 1_000_000, "ppo_ma": 500_000, "ppo_log": 1_000_000, "sac": 100_000, "td3": 100_000,
-                   "sac_ma": 50_000, "ppo_res": 500_000, "ppo_res_ma": 300_000, "ppo_bc": 500_000},
+        "agents": {"ppo": 1_000_000, "ppo_ma": 500_000, "ppo_log": 1_000_000, "ppo_sqrt": 1_000_000,
+                   "sac": 100_000, "td3": 100_000, "sac_ma": 50_000, "ppo_res": 500_000, "ppo_res_ma": 300_000,
+                   "ppo_bc": 500_000},
         "hyperparams": {},
     },
 }

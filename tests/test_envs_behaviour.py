@@ -255,6 +255,19 @@ def test_log_reward_is_the_log_of_the_quadratic_stage_cost():
         assert rl["controller_0"] == pytest.approx(-math.log1p(c / 0.2**2) * T, rel=1e-12)
 
 
+def test_sqrt_reward_is_the_root_of_the_quadratic_stage_cost():
+    quad = tracking_v0.parallel_env(max_cycles=30)
+    sq = tracking_v0.parallel_env(max_cycles=30, reward="sqrt")
+    quad.reset(seed=2)
+    sq.reset(seed=2)
+    T = quad.control_period
+    while quad.agents:
+        act = {a: quad.action_space(a).sample() * 0.1 for a in quad.agents}
+        _, rq, *_ = quad.step(act)
+        _, rs, *_ = sq.step(act)
+        assert rs["controller_0"] == pytest.approx(-math.sqrt(-rq["controller_0"] / T) * T, rel=1e-12)
+
+
 def test_log_reward_termination_penalty_uses_the_same_shape():
     bound = 15.0
     env = tracking_v0.parallel_env(state_bound=bound, reward="log", cost_scale=0.1)

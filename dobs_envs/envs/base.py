@@ -49,7 +49,7 @@ COMMON_OPTIONS = {
 }
 
 #: reward shapes of the ``reward`` option (see :func:`make_parallel_env`)
-REWARDS = ("quadratic", "log")
+REWARDS = ("quadratic", "log", "sqrt")
 
 #: Options of systems with an unknown input ``v`` (``B_v != 0``).
 DISTURBANCE_OPTIONS = {"disturbance": "exosystem", "disturbance_amplitude": 2.0}
@@ -321,6 +321,8 @@ class DObsParallelEnv(ParallelEnv):
         """Stage cost of the reward: ``c`` (quadratic) or ``log(1 + c / c0)`` (log)."""
         if self.reward_kind == "log":
             return math.log1p(c / self._log_c0) if c < math.inf else math.inf
+        if self.reward_kind == "sqrt":
+            return math.sqrt(c) if c >= 0.0 else math.nan
         return c
 
     @staticmethod
@@ -652,12 +654,13 @@ def make_parallel_env(scenario, **options) -> DObsParallelEnv:
       ``c = e'Qe + u'Ru``.
     - ``reward`` ("quadratic"): "quadratic" is ``-c * period``; "log" is
       ``-log(1 + c / c0) * period`` with ``c0 = lambda_max(Q) * cost_scale^2``
-      (``cost_scale``, 0.1, is an error norm): the log cost weighs a steady-state
-      error of 3 -> 0.03 (c: 9 -> 9e-4) as much as a transient of 30 -> 1, so
-      precise tracking moves the return (with the quadratic cost, the paper
-      controller's 20 s episode spends 94 % of its cost in the first 2 s). The
-      termination penalty uses the same shape. Benchmarks evaluate every policy on
-      the quadratic cost.
+      (``cost_scale``, 0.1, is an error norm); "sqrt" is ``-sqrt(c) * period`` (about
+      the error norm: linear rather than quadratic growth). Both reshape the cost so that
+      steady-state errors weigh more against the transient (with the quadratic cost, the
+      paper controller's 20 s tracking episode spends 90 % of its cost in the first 2 s):
+      the log cost weighs a steady-state error of 3 -> 0.03 as much as a transient of
+      30 -> 1. The termination penalty uses the same shape. Benchmarks evaluate every
+      policy on the quadratic cost.
     - ``action_bound`` (``scenario.metadata['action_bound']`` or 50): per input component.
     - ``init_noise`` (None): half-width of the uniform noise added to ``x0`` at reset
       (None: the scenario's ``x0_scale`` distribution if it has one, else 1.0).

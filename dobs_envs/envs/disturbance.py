@@ -69,8 +69,9 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ``-(x'Qx + sum_k u_k' R_k u_k) * T`` per control step (``x`` at the end of
     the step), ``Q = I_9``, ``R = I_5`` by default; shared by all agents.
     ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
-    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
-    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), and ``reward="sqrt"`` by
+    ``sqrt(c)``, so that steady-state errors weigh more against the transient
+    (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 

@@ -60,8 +60,9 @@ class HeteroMASEnv(DObsParallelEnv):
     ``Q = S^T Pi S + 0.1 (I - S^T S)`` (``x'Qx = sum_i (p_i - pbar)^2 + 0.1 ||rest||^2``,
     :func:`~dobs_envs.scenarios.mas_tasks.rendezvous_cost`) and ``r = 1``.
     ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
-    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
-    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), and ``reward="sqrt"`` by
+    ``sqrt(c)``, so that steady-state errors weigh more against the transient
+    (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 

@@ -64,8 +64,9 @@ class RandomNetworkEnv(DObsParallelEnv):
     ``-(e'Qe + u'Ru) * T`` with ``e = x`` (``x - x_r`` for a tracking
     controller), ``Q = I``, ``R = I`` unless given.
     ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
-    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
-    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), and ``reward="sqrt"`` by
+    ``sqrt(c)``, so that steady-state errors weigh more against the transient
+    (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 

@@ -67,8 +67,9 @@ class TrackingEnv(DObsParallelEnv):
     input, ``T`` the control period; ``Q = I_9``, ``R = I_5`` by default
     (``Q=``, ``R=`` options).
     ``reward="log"`` replaces the stage cost ``c`` by ``log(1 + c / c0)``, ``c0 =
-    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), so that steady-state errors
-    move the return as much as the transient (benchmarks evaluate on the quadratic cost).
+    lambda_max(Q) * cost_scale^2`` (``cost_scale=0.1``), and ``reward="sqrt"`` by
+    ``sqrt(c)``, so that steady-state errors weigh more against the transient
+    (benchmarks evaluate on the quadratic cost).
 
     ## Starting State
 
