@@ -321,7 +321,7 @@ def _plot_summary(per_env: dict, path: str, title: str) -> None:
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(r"$J / J_{paper}$ (IQM, 95% CI)")
         ax.set_title(env)
-        ax.grid(alpha=0.3, axis="x", which="both")
+        ax.grid(alpha=0.3, axis="x")
     fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI over training seeds)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

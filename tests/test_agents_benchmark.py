@@ -114,3 +114,24 @@ def test_cli_train_and_evaluate_residual(tmp_path, capsys):
     assert main(["evaluate", "--model", out, "--episodes", "1", "--seed", "3", "--json", str(tmp_path / "e.json")]) == 0
     summ = json.load(open(tmp_path / "e.json"))
     assert summ["episodes"] == 1 and summ["seeds"] == [3] and summ["failure_rate"] == 0.0
+
+
+def test_all_envs_one_summary(tmp_path):
+    out = str(tmp_path)
+    summ = run_benchmark("all", "tiny", out, progress=False, workers=2, agents=["ppo_res"], seeds=1)
+    assert summ["envs"] == ["tracking", "disturbance_rejection", "hetero_mas", "random_network"]
+    for env in summ["envs"]:
+        rows = {r["policy"]: r for r in summ["results"][env]}
+        assert rows["paper (separation)"]["cost_ratio_iqm"] == 1.0
+        assert rows[AGENTS["ppo_res"].label]["runs"] == 1
+        assert os.path.getsize(os.path.join(out, env, "results.json")) > 0
+    assert os.path.getsize(os.path.join(out, "summary.png")) > 0
+
+
+def test_bad_arguments_are_named(tmp_path):
+    with pytest.raises(ValueError, match="unknown env"):
+        run_benchmark("nope", "tiny", str(tmp_path))
+    with pytest.raises(ValueError, match="unknown budget"):
+        run_benchmark("tracking", "huge", str(tmp_path))
+    with pytest.raises(ValueError, match="unknown agents"):
+        run_benchmark("tracking", "tiny", str(tmp_path), agents=["ppo", "dqn"])
