@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
 
 from .benchmark import AGENTS, BUDGETS
@@ -18,7 +20,7 @@ def add_parser(sub) -> None:
     p.add_argument("--algo", choices=ALGOS, default="ppo")
     p.add_argument("--multi-agent", action="store_true",
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
-    p.add_argument("--timesteps", type=int, default=None,
+    p.add_argument("--timesteps", type=_positive_int, default=None,
                    help="environment steps (multi-agent: SB3 sees one sample per agent); default from the YAML")
     p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
                    help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
@@ -26,18 +28,26 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
-    p.add_argument("--checkpoint-freq", type=int, default=None, help="env steps between checkpoints (0: none)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: fastest for small MLPs)")
-    p.add_argument("--hyperparams", default=None, help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
+    p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
+                   help="env steps between checkpoints (0: none)")
+    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs)")
+    p.add_argument("--hyperparams", type=_json_object, default=None,
+                   help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
+    p.add_argument("--overwrite", action="store_true", help="replace an existing run in --out")
+    p.add_argument("--allow-custom-env", action="store_true",
+                   help="accept --env 'package.module:factory' (imports that code)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--verbose", type=int, default=0)
     p.set_defaults(func=_train)
 
     p = sub.add_parser("evaluate", help="evaluate a trained run directory on seeded episodes")
     p.add_argument("--model", required=True, help="run directory (or its model.zip)")
-    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--episodes", type=_positive_int, default=10)
     p.add_argument("--seed", type=int, default=10_000, help="episode k is reset with seed + k")
     p.add_argument("--json", default=None, help="also write the summary to this file")
+    p.add_argument("--allow-custom-env", action="store_true",
+                   help="accept a run whose config.json names 'package.module:factory' (imports that code; "
+                        "model.zip and vecnormalize.pkl are pickles: load only runs you trust)")
     p.set_defaults(func=_evaluate)
 
     p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "
@@ -57,6 +67,32 @@ def add_parser(sub) -> None:
     p.set_defaults(func=_benchmark)
 
 
+def _usage_error(msg: str) -> None:
+    """One line on stderr, exit status 2 (argparse's convention for usage errors)."""
+    print(f"dobs-envs: error: {msg}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def _json_object(text: str) -> dict:
+    try:
+        v = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise argparse.ArgumentTypeError(f"not valid JSON ({exc.msg} at column {exc.colno}): {text!r}") from None
+    if not isinstance(v, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object of hyperparameters, got {text!r}")
+    return v
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -68,22 +104,45 @@ def _positive_int(text: str) -> int:
 
 
 def _train(args) -> int:
-    from .train import train
+    from .config import EnvNameError, check_env_name
+    from .train import default_run_dir, train
 
-    hp = json.loads(args.hyperparams) if args.hyperparams else None
-    res = train(args.env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
-                out=args.out, tensorboard=args.tensorboard, progress=not args.no_progress,
-                checkpoint_freq=args.checkpoint_freq, hyperparams=hp, threads=args.threads, verbose=args.verbose,
-                hybrid=args.hybrid)
+    try:
+        env = check_env_name(args.env, multi_agent=args.multi_agent, allow_custom=args.allow_custom_env, what="--env")
+    except EnvNameError as exc:
+        _usage_error(str(exc))
+    out = args.out or default_run_dir(env, args.algo, args.multi_agent, args.seed)
+    if os.path.exists(out) and not os.path.isdir(out):
+        _usage_error(f"--out {out!r} is a file, not a directory")
+    if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
+        _usage_error(f"--out {out!r} already holds a run; pass --overwrite to replace it or choose another --out")
+    try:
+        res = train(env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
+                    out=out, tensorboard=args.tensorboard, progress=not args.no_progress,
+                    checkpoint_freq=args.checkpoint_freq, hyperparams=args.hyperparams, threads=args.threads,
+                    verbose=args.verbose, hybrid=args.hybrid)
+    except TypeError as exc:  # an unknown hyperparameter reaches the SB3 constructor
+        if "unexpected keyword argument" in str(exc):
+            _usage_error(f"--hyperparams: {exc}")
+        raise
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
 
 
 def _evaluate(args) -> int:
+    from .config import EnvNameError
     from .evaluate import evaluate_model
+    from .train import RunDirError
 
-    summ = evaluate_model(args.model, args.episodes, args.seed)
+    if args.json:
+        d = os.path.dirname(os.path.abspath(args.json))
+        if not os.path.isdir(d):
+            _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
+    try:
+        summ = evaluate_model(args.model, args.episodes, args.seed, allow_custom_env=args.allow_custom_env)
+    except (RunDirError, EnvNameError) as exc:
+        _usage_error(f"--model: {exc}")
     for k, v in summ.items():
         if k != "seeds":
             print(f"{k:34s} {v}")

@@ -40,7 +40,7 @@ from typing import Any, Callable
 import yaml
 
 __all__ = ["ENVS", "ALGOS", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gym_factory",
-           "load_hyperparams", "env_key"]
+           "load_hyperparams", "env_key", "check_env_name", "EnvNameError"]
 
 HYPERPARAMS_DIR = os.path.join(os.path.dirname(__file__), "hyperparams")
 
@@ -57,6 +57,39 @@ def env_key(env: str) -> str:
     """Normalised short name (``hetero-mas`` -> ``hetero_mas``) or the name unchanged."""
     k = env.replace("-", "_").lower()
     return k if k in ENVS else env
+
+
+class EnvNameError(ValueError):
+    """An environment name that is neither registered nor explicitly allowed."""
+
+
+def check_env_name(env, *, multi_agent: bool = False, allow_custom: bool = False, what: str = "env") -> str:
+    """Validate an environment name *before* anything is imported or built.
+
+    Accepted: a benchmark name (:data:`ENVS`), or (centralised) an id already registered in
+    Gymnasium's registry without a module prefix. ``"package.module:factory"`` (or a
+    Gymnasium ``"module:Env-v0"`` id, which ``gym.make`` imports) names code to import: it
+    is accepted only with ``allow_custom=True`` (the CLI's ``--allow-custom-env``), never
+    implicitly from a file such as a run directory's ``config.json``.
+    """
+    if not isinstance(env, str) or not env:
+        raise EnvNameError(f"{what} must be a non-empty string, got {env!r}")
+    if env_key(env) in ENVS:
+        return env_key(env)
+    if ":" in env:
+        if allow_custom:
+            return env
+        raise EnvNameError(f"{what} {env!r} names code to import; only the registered environments {sorted(ENVS)} "
+                           f"are accepted unless you pass --allow-custom-env (allow_custom=True)")
+    if not multi_agent:
+        import gymnasium as gym
+
+        import dobs_envs  # noqa: F401  (registers dobs_envs/* ids)
+
+        if env in gym.registry:
+            return env
+    raise EnvNameError(f"unknown {what} {env!r}; choose from {sorted(ENVS)}"
+                       + ("" if multi_agent else " or a registered Gymnasium id (e.g. Pendulum-v1)"))
 
 
 def gym_id(env: str) -> str:

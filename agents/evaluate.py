@@ -165,11 +165,23 @@ def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
     return out
 
 
-def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True) -> dict:
-    """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment."""
-    from .config import gym_factory, parallel_factory
-    from .train import load_agent
+def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True,
+                   allow_custom_env: bool = False) -> dict:
+    """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment.
 
+    The environment named in the run's ``config.json`` must be a registered one
+    (:func:`agents.config.check_env_name`); a ``module:attr`` name is refused unless
+    ``allow_custom_env`` (a file must never make us import code). ``model.zip`` and
+    ``vecnormalize.pkl`` are pickles: load runs only from trusted sources.
+    """
+    from .config import check_env_name, gym_factory, parallel_factory
+    from .train import load_agent, read_run_config
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    cfg = read_run_config(path)
+    check_env_name(cfg.get("env"), multi_agent=bool(cfg.get("multi_agent")), allow_custom=allow_custom_env,
+                   what="the run's environment (config.json 'env')")
     agent = load_agent(path)
     cfg = agent.config
     # the task's own env (a recipe's training-only options, cfg["train_env_kwargs"], do not apply)

@@ -270,6 +270,33 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     return TrainResult(path=out, model=model, seconds=seconds, config=config)
 
 
+class RunDirError(ValueError):
+    """A run directory that is missing, incomplete or corrupt."""
+
+
+def read_run_config(path: str) -> dict:
+    """``config.json`` of a run directory (or of the directory holding ``model.zip``), validated."""
+    path = path[:-len("model.zip")] if str(path).endswith("model.zip") else str(path)
+    path = path.rstrip("/") or "."
+    if not os.path.isdir(path):
+        raise RunDirError(f"run directory {path!r} does not exist (expected the --out of a training run)")
+    cfg_path = os.path.join(path, "config.json")
+    for f in ("config.json", "model.zip"):
+        if not os.path.isfile(os.path.join(path, f)):
+            raise RunDirError(f"{path!r} is not a finished run directory: {f} is missing")
+    try:
+        with open(cfg_path) as fh:
+            cfg = json.load(fh)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RunDirError(f"{cfg_path} is not valid JSON: {exc}") from None
+    missing = [k for k in ("env", "algo", "multi_agent") if k not in cfg] if isinstance(cfg, dict) else ["all keys"]
+    if missing:
+        raise RunDirError(f"{cfg_path} lacks {missing}")
+    if cfg["algo"] not in ("ppo", "sac", "td3"):
+        raise RunDirError(f"{cfg_path}: unknown algo {cfg['algo']!r}")
+    return cfg
+
+
 class TrainedAgent:
     """A saved run loaded for evaluation: normalises observations like in training.
 
@@ -297,8 +324,7 @@ class TrainedAgent:
     def __init__(self, path: str, device: str = "cpu"):
         path = path[:-len("model.zip")] if path.endswith("model.zip") else path
         path = path.rstrip("/") or "."
-        with open(os.path.join(path, "config.json")) as fh:
-            self.config = json.load(fh)
+        self.config = read_run_config(path)
         self.path = path
         self.algo = self.config["algo"]
         self.multi_agent = bool(self.config["multi_agent"])

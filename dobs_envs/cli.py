@@ -19,12 +19,19 @@ _SUBCOMMAND_MODULES = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors are one line on stderr (``prog: error: message``, the usage on ``-h``), exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} -h)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="dobs-envs",
         description="Distributed-observer control benchmark (Cao & Yin).",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     for name, commands in _SUBCOMMAND_MODULES.items():
         try:
             module = importlib.import_module(name)

@@ -8,11 +8,8 @@ import os
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
-pytest.importorskip("dobs_envs.tracking_v0")
-
-from agents.benchmark import AGENTS, ANALYTIC, BUDGETS, run_benchmark  # noqa: E402
-from dobs_envs.cli import main  # noqa: E402
+from agents.benchmark import AGENTS, ANALYTIC, BUDGETS, run_benchmark
+from dobs_envs.cli import main
 
 TINY = BUDGETS["tiny"]
 
@@ -53,7 +50,6 @@ def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
         assert res[AGENTS[k].label]["kind"] == ("hybrid" if AGENTS[k].hybrid else "RL")
     p = res["paper (separation)"]
     assert p["runs"] == 1 and p["cost_ratio_iqm"] == p["cost_ratio_ci_low"] == p["cost_ratio_ci_high"] == 1.0
-    assert res["zero input"]["control_effort_mean"] == 0.0
     # 1-second episodes: the oracle already pulls x towards x_r while the open-loop plant drifts
     assert res["oracle (full state)"]["final_tracking_error_iqm"] < res["zero input"]["final_tracking_error_iqm"]
     # different training seeds give different agents
