@@ -192,12 +192,26 @@ def reproduce(names, out: str, *, t_end: float | None = None, dt: float | None =
     return results
 
 
+def _positive_float(text: str) -> float:
+    import argparse
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return v
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("reproduce", help="reproduce the paper's numerical examples (figures + metrics.json)")
     p.add_argument("scenario", choices=sorted(PAPER_SCENARIOS) + ["all"])
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--t-end", type=float, default=None, help="horizon in seconds (default: the scenario's: NE1 30 s, NE2/NE3 20 s)")
-    p.add_argument("--dt", type=float, default=None, help="Euler step (default 1e-3)")
+    p.add_argument("--t-end", type=_positive_float, default=None,
+                   help="horizon in seconds (default: the scenario's: NE1 30 s, NE2/NE3 20 s)")
+    p.add_argument("--dt", type=_positive_float, default=None, help="Euler step (default 1e-3)")
     p.add_argument("--backend", choices=["numba", "numpy"], default="numba")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)

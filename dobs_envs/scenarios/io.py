@@ -133,12 +133,16 @@ def _list(v, source, key) -> list:
     return list(v)
 
 
-def _array(v, source, key, ndim=None) -> np.ndarray:
+def _array(v, source, key, ndim=None, finite: bool = False) -> np.ndarray:
     try:
         a = np.array(v, dtype=float)
+    except OverflowError:
+        raise ScenarioFileError(source, key, "holds a number too large for a float (|x| > 1.8e308)") from None
     except (TypeError, ValueError):
         raise ScenarioFileError(source, key, "must be a number, a list of numbers or a nested list "
                                              "of numbers with rows of equal length") from None
+    if finite and not np.all(np.isfinite(a)):
+        raise ScenarioFileError(source, key, "must be finite (no NaN or inf entries)")
     if ndim is not None and a.ndim != ndim:
         raise ScenarioFileError(source, key, f"must be {ndim}-D, got shape {a.shape}")
     return a
@@ -284,7 +288,10 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     controller = kw.get("controller", "feedback")
     if "K_shift" in d and "K" in d:
         raise ScenarioFileError(source, "K_shift", "only applies when K is omitted (K is given)")
-    A = _array(kw["A"], source, "A")
+    A = _array(kw["A"], source, "A", finite=True)
+    for k, b in enumerate(kw["channels"]):
+        if not np.all(np.isfinite(b)):
+            raise ScenarioFileError(source, f"channels[{k}]", "must be finite (no NaN or inf entries)")
     try:
         if A.ndim != 2 or A.shape[0] != A.shape[1] or A.shape[0] == 0:
             raise ValueError
@@ -306,6 +313,8 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
             raise ScenarioFileError(source, "P", f"omitted, and (A + BK)^T P + P (A + BK) = -I failed: {exc}") from None
     try:
         return Scenario(**kw)
+    except OverflowError:
+        raise ScenarioFileError(source, None, "holds a number too large for a float (|x| > 1.8e308)") from None
     except (TypeError, ValueError) as exc:
         m = re.match(r"Scenario\.(\w+(?:\[\d+\])?(?:\.\w+)?)", str(exc))
         raise ScenarioFileError(source, m.group(1) if m else None, str(exc)) from None
@@ -408,15 +417,50 @@ def load_scenario(path) -> Scenario:
     """
     path = os.fspath(path)
     fmt = _format(path)
-    with open(path, encoding="utf-8") as fh:
-        text = fh.read()
+    if os.path.isdir(path):
+        raise ScenarioFileError(path, None, "is a directory, not a scenario file")
+    if os.path.exists(path) and os.path.getsize(path) > MAX_FILE_BYTES:
+        raise ScenarioFileError(path, None, f"is larger than {MAX_FILE_BYTES} bytes; not a scenario file")
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except UnicodeDecodeError as exc:
+        raise ScenarioFileError(path, None, f"is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
         data = yaml.safe_load(text) if fmt == "yaml" else json.loads(text)
     except (yaml.YAMLError, json.JSONDecodeError) as exc:
         raise ScenarioFileError(path, None, f"cannot parse {fmt.upper()}: {exc}") from None
+    except (RecursionError, OverflowError, ValueError) as exc:  # pathological nesting / numbers
+        raise ScenarioFileError(path, None, f"cannot parse {fmt.upper()}: {type(exc).__name__}: {exc}") from None
     if data is None:
         raise ScenarioFileError(path, None, "file is empty")
+    n = _expanded_size(data)
+    if n > MAX_ELEMENTS:
+        raise ScenarioFileError(path, None, f"expands to more than {MAX_ELEMENTS} values (YAML aliases?); "
+                                            "a scenario file holds at most that many")
     return scenario_from_dict(data, source=path)
+
+
+#: caps of what a scenario file may hold (a 2 KB YAML with nested aliases can expand to 1e7 values)
+MAX_FILE_BYTES = 64 * 2**20
+MAX_ELEMENTS = 2_000_000
+
+
+def _expanded_size(obj, _memo=None) -> int:
+    """Number of scalar values ``obj`` expands to when every alias is copied out (linear time:
+    shared sub-objects, which YAML aliases create, are counted once per reference from a memo)."""
+    memo = {} if _memo is None else _memo
+    key = id(obj)
+    if key in memo:
+        return memo[key]
+    if isinstance(obj, Mapping):
+        n = sum(_expanded_size(v, memo) for v in obj.values()) + len(obj)
+    elif isinstance(obj, (list, tuple)):
+        n = sum(_expanded_size(v, memo) for v in obj)
+    else:
+        n = 1
+    memo[key] = min(n, 10 * MAX_ELEMENTS)  # saturate: no huge integers
+    return memo[key]
 
 
 def save_scenario(scenario: Scenario, path) -> str:
