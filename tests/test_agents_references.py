@@ -4,12 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("dobs_envs.envs.base")
-
-from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy  # noqa: E402
-from dobs_envs.design.gains import shifted_are_feedback  # noqa: E402
-from dobs_envs.envs.base import make_parallel_env  # noqa: E402
-from dobs_envs.graphs import path_graph  # noqa: E402
+from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
+from dobs_envs.design.gains import shifted_are_feedback
+from dobs_envs.envs.base import make_parallel_env
+from dobs_envs.graphs import path_graph
 from dobs_envs.scenarios.base import Scenario  # noqa: E402
 
 

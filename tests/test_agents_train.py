@@ -125,11 +125,15 @@ def test_multi_agent_rejects_td3(tmp_path):
 
 
 def test_hyperparams_lookup_order():
-    hp = load_hyperparams("ppo", "Pendulum-v1")
-    assert hp["n_steps"] == 1024 and hp["normalize"] is False  # env entry overrides default
-    ma = load_hyperparams("ppo", "some_env", multi_agent=True)
-    assert ma["agent_id"] is True and ma["n_steps"] == load_hyperparams("ppo", "default")["n_steps"]
-    over = load_hyperparams("ppo", "Pendulum-v1", overrides={"policy_kwargs": {"net_arch": [8]}})
+    default = load_hyperparams("ppo", "default")
+    hp = load_hyperparams("ppo", "tracking")
+    assert hp["n_envs"] == 8 and default["n_envs"] == 4  # env entry overrides default
+    assert hp["env_kwargs"] == {"state_bound": 30}
+    ma = load_hyperparams("ppo", "tracking", multi_agent=True)
+    assert ma["agent_id"] is True and ma["n_envs"] == 4  # default-ma, then tracking, then tracking-ma
+    res = load_hyperparams("ppo", "tracking", variant="residual")
+    assert res["residual_scale"] == 0.2 and res["n_envs"] == 8
+    over = load_hyperparams("ppo", "tracking", overrides={"policy_kwargs": {"net_arch": [8]}})
     assert over["policy_kwargs"]["net_arch"] == [8] and over["policy_kwargs"]["activation_fn"] == "tanh"
     with pytest.raises(ValueError, match="algorithm"):
         load_hyperparams("a2c", "default")
