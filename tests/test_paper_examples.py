@@ -103,7 +103,8 @@ def test_reproduce_writes_figures_and_metrics(tmp_path):
     met = json.loads((tmp_path / "ne2" / "metrics.json").read_text())
     assert met == res["ne2"]
     for key in ("final_estimation_error", "final_tracking_error", "max_gamma", "max_gamma_s", "max_beta",
-                "t_end", "dt", "control_total_variation_last_5s"):
+                "t_end", "dt", "control_total_variation_raw_last_5s", "control_total_variation_smoothed_last_5s",
+                "estimation_error_last_5s", "task_error_last_5s"):
         assert key in met
     assert met["max_beta"] is None and met["t_end"] == pytest.approx(1.0) and met["dt"] == 1e-3
     for f in met["figures"]:
@@ -118,4 +119,15 @@ def test_metrics_definitions(ne2_traj):
     assert met["final_estimation_error"] == pytest.approx(ne2_traj.est_err[-1].max())
     start = int(np.searchsorted(ne2_traj.t, ne2_traj.t[-1] - 5.0))
     u = ne2_traj.u[start:-1]  # inputs applied on [t_end - 5, t_end)
-    assert met["control_total_variation_last_5s"] == pytest.approx(np.abs(np.diff(u, axis=0)).sum())
+    assert met["control_total_variation_raw_last_5s"] == pytest.approx(np.abs(np.diff(u, axis=0)).sum())
+    ee = ne2_traj.est_err[start:].max(axis=1)
+    te = np.linalg.norm(ne2_traj.x[start:] - ne2_traj.x_r[start:], axis=1)
+    assert met["estimation_error_last_5s"] == pytest.approx(
+        {"rms": np.sqrt(np.mean(ee ** 2)), "peak": ee.max(), "end": ee[-1]})
+    assert met["task_error_last_5s"] == pytest.approx({"rms": np.sqrt(np.mean(te ** 2)), "peak": te.max(), "end": te[-1]})
+
+
+def test_ne1_figures_are_named_for_what_they_show(tmp_path):
+    met = reproduce(["ne1"], str(tmp_path), t_end=0.5, progress=False)["ne1"]
+    assert "state_norm_open_loop.png" in met["figures"] and "stabilisation_error.png" not in met["figures"]
+    assert met["task_error_last_5s"] is None and met["final_tracking_error"] is None
