@@ -3,21 +3,31 @@
 Same operations as :func:`.numpy_step.control_period_numpy` (see its docstring for
 the equations); the two are tested against each other.
 
+Sparse rows
+-----------
+The paper's design matrices are sparse (NE2: 55 of the 486 entries of ``Ebar`` are
+nonzero, 8 of the 81 of ``A``): every matrix-vector product runs over the stored entries
+of row-compressed matrices (:attr:`KernelArgs.rows <dobs_envs.sim.state.KernelArgs>`,
+:func:`~dobs_envs.sim.state.compress_rows`), each sum in column order. Skipping exact zeros
+leaves every finite result unchanged (``fma(0, x, s) = s``) and halves NE2's flops
+(:func:`flops_per_period`).
+
 Two layouts of the same arithmetic
 ----------------------------------
 - :func:`period_copy` advances one copy ``b`` of a batch-first state
-  (``x (B, n)``, ``z (B, N, n)``, ...): scalar code, the outputs of each
-  matrix-vector product computed four at a time (independent FMA chains).
+  (``x (B, n)``, ``z (B, N, n)``, ...): scalar code, one loop over the stored entries of
+  each matrix (no data-dependent inner loops).
 - :func:`period_tile` advances a *tile* of ``W`` copies stored with the copy axis
   **innermost** (``X (n, W)``, ``Z (N, n, W)``, ...): every statement is a loop over
-  the ``W`` copies, which the compiler turns into SIMD instructions across copies.
+  the ``W`` copies, which the compiler turns into SIMD instructions across copies
+  (``W`` is a compile-time constant: :data:`TILE` or :data:`SMALL_TILE`).
 
 :func:`advance_rows` cuts a range of copies into tiles of :data:`TILE` copies
-(gathered from / scattered back to the batch-first arrays), a last tile of the
-remaining copies if there are at least :data:`MIN_TILE` of them, and runs the rest
-copy by copy. Every copy's arithmetic is identical in both layouts -- each sum is
-accumulated in the same order, term by term, and :data:`FASTMATH` excludes
-reassociation -- so a copy's trajectory does not depend on the batch size or on its
+(gathered from / scattered back to the batch-first arrays), then tiles of
+:data:`SMALL_TILE` (the last one padded) while at least :data:`MIN_TILE` copies remain,
+and runs the rest copy by copy. Every copy's arithmetic is identical in both layouts --
+each sum is accumulated in the same order, term by term, and :data:`FASTMATH` allows only
+FMA contraction -- so a copy's trajectory does not depend on the batch size or on its
 position in the batch (tested bit for bit).
 
 The constants arrive as one :class:`~dobs_envs.sim.state.KernelArgs` tuple
@@ -27,16 +37,20 @@ from __future__ import annotations
 
 import numpy as np
 
-#: LLVM fast-math flags of the kernel: FMA contraction (``contract``) and ``nsz``, but
-#: neither ``reassoc`` (a copy's sums must not be reordered differently in the scalar and
-#: the tiled layout) nor ``nnan``/``ninf`` (NaN and inf propagate as IEEE arithmetic says:
-#: an overflowing observer yields a non-finite state the environment detects and
-#: terminates on, instead of undefined behaviour).
-FASTMATH = {"nsz", "contract"}
-#: Copies per SIMD tile of :func:`advance_rows` (measured on 2 cores, NE2: 128 beats 64 and 256).
+#: LLVM fast-math flags of the kernel: FMA contraction (``contract``) only. Not ``reassoc``
+#: (a copy's sums must not be reordered differently in the scalar and the tiled layout),
+#: not ``nsz`` (``0.0 + a*b`` must stay an FMA with 0, never a bare product that a following
+#: addition could contract either way), not ``nnan``/``ninf`` (NaN and inf propagate as IEEE
+#: arithmetic says: an overflowing observer yields a non-finite state the environment
+#: detects and terminates on, instead of undefined behaviour).
+FASTMATH = {"contract"}
+#: Copies per SIMD tile of :func:`advance_rows` (NE2, one core: 5.4 us per copy and control step
+#: at 128, 6.1 at 64; 256 was slower than 128 in the dense kernel).
 TILE = 128
-#: Fewest copies run as a (narrower) tile; fewer remaining copies run one by one.
-MIN_TILE = 8
+#: Copies per tile of a remainder of fewer than TILE copies.
+SMALL_TILE = 64
+#: Fewest remaining copies run as a (padded) small tile, fewer run one by one (the cost crossover on NE2).
+MIN_TILE = 14
 
 try:  # numba is a hard dependency, but keep the package importable without it
     import numba
@@ -53,7 +67,7 @@ except ImportError:  # pragma: no cover
     _njit_inline = _njit
 
 
-__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "period_copy", "period_tile", "advance_rows",
+__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "SMALL_TILE", "MIN_TILE", "period_copy", "period_tile", "advance_rows",
            "control_period_compiled", "flops_per_period"]
 
 
@@ -62,8 +76,20 @@ def _scratch_copy(ka):
     """Work arrays of :func:`period_copy` (allocated once per batch call)."""
     C, E_bar, Q_proj, B_v = ka[3], ka[4], ka[8], ka[2]
     N, n, p, rq, mv = E_bar.shape[0], E_bar.shape[1], C.shape[1], Q_proj.shape[2], B_v.shape[1]
-    return (np.empty((N, p)), np.empty((N, n)), np.empty((N, n)), np.empty(rq), np.empty(n), np.empty((N, n)),
-            np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(mv))
+    return (np.empty(N * p), np.empty(N * n), np.empty(N * n), np.empty(N * rq), np.empty(N * n), np.empty(N * n),
+            np.empty(n), np.empty(n), np.empty(N * n), np.empty(n), np.empty(n), np.empty(mv), np.empty(N),
+            np.empty(N), np.empty(N))
+
+
+@_njit_inline
+def _terms(out, rows, vec):
+    """``out[row[j]] += val[j] * vec[gcol[j]]`` over every stored entry ``j`` of a row-compressed
+    matrix: each output row sums its terms in column order (one loop over all entries, no
+    data-dependent inner loops)."""
+    ptr, col, val, row, gcol = rows
+    for j in range(val.shape[0]):
+        q = row[j]
+        out[q] = out[q] + val[j] * vec[gcol[j]]
 
 
 @_njit
@@ -72,160 +98,98 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
 
     ``x (B, n)``, ``z (B, N, n)``, ``gamma``/``gamma_s (B, N)``, ``v (B, m_v)``, ``x_r (B, n)``;
     held ``u``/``r (B, m)``; ``ka`` the :class:`~dobs_envs.sim.state.KernelArgs` fields in
-    order; ``sc`` the work arrays of :func:`_scratch_copy`.
+    order; ``sc`` the work arrays of :func:`_scratch_copy`. Every matrix-vector product runs
+    over the stored entries of a row-compressed matrix (``ka.rows``), each output summing its
+    terms in column order, as :func:`period_tile` does per copy.
     """
     (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference) = ka  # = KernelArgs._fields
-    y, xhat, d, cq, w, bu, Bu, Br, znew, xdot, xrdot, vnew = sc
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka  # = KernelArgs._fields
+    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows  # = ROW_MATRICES
+    y, xhat, d, cq, w, bu, Bu, Br, zn, xdot, xrdot, vnew, nwv, nw2v, coef = sc
     N, n = z.shape[1], z.shape[2]
-    p, m, mv = C.shape[1], B.shape[1], B_v.shape[1]
+    p, mv = C.shape[1], B_v.shape[1]
     rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    xb, xrb, vb, ub, rb = x[b], x_r[b], v[b], u[b], r[b]
+    zb = z[b].reshape(N * n)  # node i's state at i * n
     # held inputs (ZOH over the control period): Bbar_i u, B u, B r
-    for i in range(N):
-        for k in range(n):
-            s = 0.0
-            for j in range(m):
-                s = s + B_bar[i, k, j] * u[b, j]
-            bu[i, k] = s
-    for k in range(n):
-        s = 0.0
-        s2 = 0.0
-        for j in range(m):
-            s = s + B[k, j] * u[b, j]
-            s2 = s2 + B[k, j] * r[b, j]
-        Bu[k] = s
-        Br[k] = s2
+    bu[:] = 0.0
+    _terms(bu, BBr, ub)
+    Bu[:] = 0.0
+    _terms(Bu, BUr, ub)
+    Br[:] = 0.0
+    _terms(Br, BUr, rb)
     for _ in range(substeps):
         # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
-        for i in range(N):
-            for q in range(p):
-                s = 0.0
-                for k in range(n):
-                    s = s + C[i, q, k] * x[b, k]
-                y[i, q] = s
-            for k in range(n):
-                s = z[b, i, k]
-                for q in range(p):
-                    s = s + G_bar[i, k, q] * y[i, q]
-                xhat[i, k] = s
+        for q in range(N * p):
+            y[q] = 0.0
+        _terms(y, CCr, xb)
+        for q in range(N * n):
+            xhat[q] = zb[q]
+        _terms(xhat, GGr, y)
         # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
         for i in range(N):
             for k in range(n):
-                d[i, k] = deg[i] * xhat[i, k]
+                d[i * n + k] = deg[i] * xhat[i * n + k]
             for q in range(maxdeg):
                 a = nbr_w[i, q]
                 if a != 0.0:
-                    j = nbr_idx[i, q]
+                    jn = nbr_idx[i, q] * n
                     for k in range(n):
-                        d[i, k] = d[i, k] - a * xhat[j, k]
+                        d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
+        # w_i = P_u,i d_i through the thinner of the two bases:
+        # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
+        for q in range(N * rq):
+            cq[q] = 0.0
+        _terms(cq, QTr, d)
+        for q in range(N * n):
+            w[q] = 0.0
+        _terms(w, QQr, cq)
         for i in range(N):
-            # w = P_u,i d_i through the thinner of the two bases:
-            # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
-            for c in range(rq):
-                s = 0.0
-                for l in range(n):
-                    s = s + Q_proj[i, l, c] * d[i, l]
-                cq[c] = s
             nw2 = 0.0
             for k in range(n):
-                s = 0.0
-                for c in range(rq):
-                    s = s + Q_proj[i, k, c] * cq[c]
+                s = w[i * n + k]
                 if not proj_range[i]:
-                    s = d[i, k] - s
-                w[k] = s
+                    s = d[i * n + k] - s
+                w[i * n + k] = s
                 nw2 = nw2 + s * s
             nw = np.sqrt(nw2)
+            nwv[i] = nw
+            nw2v[i] = nw2
+            coef[i] = gamma[b, i] + (gamma_s[b, i] / nw if nw > 0.0 else 0.0)  # eq. (H_idefine), h(0) = 0
+        # eq. (zidynamic) for every node
+        for i in range(N):
+            ci = coef[i]
+            for k in range(n):
+                zn[i * n + k] = bu[i * n + k] - ci * w[i * n + k]
+        _terms(zn, EEr, zb)
+        _terms(zn, FFr, y)
+        for q in range(N * n):
+            zb[q] = zb[q] + dt * zn[q]
+        # eqs. (gammaiis)/(gagasbeta)
+        for i in range(N):
             g = gamma[b, i]
             gs = gamma_s[b, i]
-            coef = g + (gs / nw if nw > 0.0 else 0.0)  # eq. (H_idefine), h(0) = 0
-            # eq. (zidynamic): four outputs at a time (independent chains, same order per output)
-            k = 0
-            while k + 4 <= n:
-                s0 = bu[i, k] - coef * w[k]
-                s1 = bu[i, k + 1] - coef * w[k + 1]
-                s2 = bu[i, k + 2] - coef * w[k + 2]
-                s3 = bu[i, k + 3] - coef * w[k + 3]
-                for l in range(n):
-                    zl = z[b, i, l]
-                    s0 = s0 + E_bar[i, k, l] * zl
-                    s1 = s1 + E_bar[i, k + 1, l] * zl
-                    s2 = s2 + E_bar[i, k + 2, l] * zl
-                    s3 = s3 + E_bar[i, k + 3, l] * zl
-                for q in range(p):
-                    yq = y[i, q]
-                    s0 = s0 + F_bar[i, k, q] * yq
-                    s1 = s1 + F_bar[i, k + 1, q] * yq
-                    s2 = s2 + F_bar[i, k + 2, q] * yq
-                    s3 = s3 + F_bar[i, k + 3, q] * yq
-                znew[k] = z[b, i, k] + dt * s0
-                znew[k + 1] = z[b, i, k + 1] + dt * s1
-                znew[k + 2] = z[b, i, k + 2] + dt * s2
-                znew[k + 3] = z[b, i, k + 3] + dt * s3
-                k += 4
-            while k < n:
-                s = bu[i, k] - coef * w[k]
-                for l in range(n):
-                    s = s + E_bar[i, k, l] * z[b, i, l]
-                for q in range(p):
-                    s = s + F_bar[i, k, q] * y[i, q]
-                znew[k] = z[b, i, k] + dt * s
-                k += 1
-            for k in range(n):
-                z[b, i, k] = znew[k]
-            # eqs. (gammaiis)/(gagasbeta)
-            gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2)
-            gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nw)
+            gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2v[i])
+            gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nwv[i])
         # eq. (LTIsys) plant and eq. (refxdy) reference model
-        _matvec4(xdot, Bu, A, x, b)
         for k in range(n):
-            s = xdot[k]
-            for j in range(mv):
-                s = s + B_v[k, j] * v[b, j]
-            xdot[k] = s
+            xdot[k] = Bu[k]
+        _terms(xdot, AAr, xb)
+        _terms(xdot, BVr, vb)
         if has_reference:
-            _matvec4(xrdot, Br, A_r, x_r, b)
             for k in range(n):
-                x_r[b, k] = x_r[b, k] + dt * xrdot[k]
+                xrdot[k] = Br[k]
+            _terms(xrdot, ARr, xrb)
+            for k in range(n):
+                xrb[k] = xrb[k] + dt * xrdot[k]
         for k in range(n):
-            x[b, k] = x[b, k] + dt * xdot[k]
+            xb[k] = xb[k] + dt * xdot[k]
         # exosystem v <- expm(S dt) v
         for j in range(mv):
-            s = 0.0
-            for l in range(mv):
-                s = s + Phi_v[j, l] * v[b, l]
-            vnew[j] = s
+            vnew[j] = 0.0
+        _terms(vnew, PVr, vb)
         for j in range(mv):
-            v[b, j] = vnew[j]
-
-
-@_njit
-def _matvec4(out, init, M, X, b):
-    """``out[k] = init[k] + sum_l M[k, l] X[b, l]`` (terms in order of ``l``), four rows at a time."""
-    K, L = M.shape[0], M.shape[1]
-    k = 0
-    while k + 4 <= K:
-        s0 = init[k]
-        s1 = init[k + 1]
-        s2 = init[k + 2]
-        s3 = init[k + 3]
-        for l in range(L):
-            xl = X[b, l]
-            s0 = s0 + M[k, l] * xl
-            s1 = s1 + M[k + 1, l] * xl
-            s2 = s2 + M[k + 2, l] * xl
-            s3 = s3 + M[k + 3, l] * xl
-        out[k] = s0
-        out[k + 1] = s1
-        out[k + 2] = s2
-        out[k + 3] = s3
-        k += 4
-    while k < K:
-        s = init[k]
-        for l in range(L):
-            s = s + M[k, l] * X[b, l]
-        out[k] = s
-        k += 1
+            vb[j] = vnew[j]
 
 
 @_njit
@@ -242,31 +206,34 @@ def _scratch_tile(ka, W):
 
 
 @_njit
-def period_tile(X, Z, G, GS, V, XR, U, R, ka, work):
+def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
     """One control period of a tile of ``W`` copies, copy axis last, in place.
 
     ``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``, ``XR (n, W)``,
-    ``U``/``R (m, W)``. Per copy the same operations in the same order as
-    :func:`period_copy`; the innermost loops run over the copies (SIMD).
+    ``U``/``R (m, W)``; ``W`` must be a compile-time constant (:data:`TILE`, :data:`SMALL_TILE`).
+    Per copy the same operations in the same order as :func:`period_copy`; the innermost
+    loops run over the copies (SIMD), each pass over the copies adding up to four terms.
     """
+    numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
     (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference) = ka
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
+    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows
     Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw = work
-    N, n, W = Z.shape[0], Z.shape[1], Z.shape[2]
-    p, m, mv = C.shape[1], B.shape[1], B_v.shape[1]
+    N, n = Z.shape[0], Z.shape[1]
+    p, mv = C.shape[1], B_v.shape[1]
     rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
     for i in range(N):
         for k in range(n):
-            _tile_dot(BU[i, k], None, B_bar[i, k], U, W)
+            _tile_dot(BU[i, k], None, BBr, i * n + k, U, W)
     for k in range(n):
-        _tile_dot(Bu[k], None, B[k], U, W)
-        _tile_dot(Br[k], None, B[k], R, W)
+        _tile_dot(Bu[k], None, BUr, k, U, W)
+        _tile_dot(Br[k], None, BUr, k, R, W)
     for _ in range(substeps):
         for i in range(N):
             for q in range(p):
-                _tile_dot(Y[i, q], None, C[i, q], X, W)
+                _tile_dot(Y[i, q], None, CCr, i * p + q, X, W)
             for k in range(n):
-                _tile_dot(XH[i, k], Z[i, k], G_bar[i, k], Y[i], W)
+                _tile_dot(XH[i, k], Z[i, k], GGr, i * n + k, Y[i], W)
         for i in range(N):
             dg = deg[i]
             for k in range(n):
@@ -281,30 +248,28 @@ def period_tile(X, Z, G, GS, V, XR, U, R, ka, work):
                             D[i, k, c] = D[i, k, c] - a * XH[j, k, c]
         for i in range(N):
             for c_ in range(rq):
-                for c in range(W):
-                    CQ[c_, c] = 0.0
-                for l in range(n):
-                    e = Q_proj[i, l, c_]
-                    for c in range(W):
-                        CQ[c_, c] = CQ[c_, c] + e * D[i, l, c]
+                _tile_dot(CQ[c_], None, QTr, i * rq + c_, D[i], W)
             for c in range(W):
                 nw2[c] = 0.0
             rng_ = proj_range[i]
             for k in range(n):
-                _tile_dot(Wv[k], None, Q_proj[i, k], CQ, W)
-                if not rng_:
+                _tile_dot(Wv[k], None, QQr, i * n + k, CQ, W)
+                if rng_:
                     for c in range(W):
-                        Wv[k, c] = D[i, k, c] - Wv[k, c]
-                for c in range(W):
-                    nw2[c] = nw2[c] + Wv[k, c] * Wv[k, c]
+                        nw2[c] = nw2[c] + Wv[k, c] * Wv[k, c]
+                else:
+                    for c in range(W):
+                        w = D[i, k, c] - Wv[k, c]
+                        Wv[k, c] = w
+                        nw2[c] = nw2[c] + w * w
             for c in range(W):
                 nw[c] = np.sqrt(nw2[c])
                 coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
             for k in range(n):
                 for c in range(W):
                     ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
-                _tile_dot(ZN[k], ZN[k], E_bar[i, k], Z[i], W)
-                _tile_dot(ZN[k], ZN[k], F_bar[i, k], Y[i], W)
+                _tile_dot(ZN[k], ZN[k], EEr, i * n + k, Z[i], W)
+                _tile_dot(ZN[k], ZN[k], FFr, i * n + k, Y[i], W)
                 for c in range(W):
                     ZN[k, c] = Z[i, k, c] + dt * ZN[k, c]
             for k in range(n):
@@ -317,11 +282,12 @@ def period_tile(X, Z, G, GS, V, XR, U, R, ka, work):
                 G[i, c] = g + dt * (-sg * g + ph * nw2[c])
                 GS[i, c] = gs + dt * (-sgs * gs + phs * nw[c])
         for k in range(n):
-            _tile_dot(XD[k], Bu[k], A[k], X, W)
-            _tile_dot(XD[k], XD[k], B_v[k], V, W)
+            _tile_dot(XD[k], Bu[k], AAr, k, X, W)
+            if mv:
+                _tile_dot(XD[k], XD[k], BVr, k, V, W)
         if has_reference:
             for k in range(n):
-                _tile_dot(XRD[k], Br[k], A_r[k], XR, W)
+                _tile_dot(XRD[k], Br[k], ARr, k, XR, W)
             for k in range(n):
                 for c in range(W):
                     XR[k, c] = XR[k, c] + dt * XRD[k, c]
@@ -329,34 +295,36 @@ def period_tile(X, Z, G, GS, V, XR, U, R, ka, work):
             for c in range(W):
                 X[k, c] = X[k, c] + dt * XD[k, c]
         for j in range(mv):
-            _tile_dot(VN[j], None, Phi_v[j], V, W)
+            _tile_dot(VN[j], None, PVr, j, V, W)
         for j in range(mv):
             for c in range(W):
                 V[j, c] = VN[j, c]
 
 
 @_njit_inline
-def _tile_dot(out, init, row, X, W):
-    """``out[c] = init[c] + sum_l row[l] X[l, c]`` (``init`` None: 0) for the ``W`` copies ``c``;
-    terms added in order of ``l``, four per pass over the copies."""
+def _tile_dot(out, init, rows, q, X, W):
+    """``out[c] = init[c] + sum_l M[q, l] X[l, c]`` (``init`` None: 0) for the ``W`` copies ``c``,
+    ``M = rows`` row-compressed: the stored entries of row ``q`` in column order, up to four
+    per pass over the copies."""
+    ptr, col, val, _, _ = rows
     if init is None:
         for c in range(W):
             out[c] = 0.0
     else:
         for c in range(W):
             out[c] = init[c]
-    L = row.shape[0]
-    l = 0
-    while l + 4 <= L:
-        e0, e1, e2, e3 = row[l], row[l + 1], row[l + 2], row[l + 3]
+    j, hi = ptr[q], ptr[q + 1]
+    while j + 4 <= hi:
+        e0, e1, e2, e3 = val[j], val[j + 1], val[j + 2], val[j + 3]
+        l0, l1, l2, l3 = col[j], col[j + 1], col[j + 2], col[j + 3]
         for c in range(W):
-            out[c] = out[c] + e0 * X[l, c] + e1 * X[l + 1, c] + e2 * X[l + 2, c] + e3 * X[l + 3, c]
-        l += 4
-    while l < L:
-        e = row[l]
+            out[c] = out[c] + e0 * X[l0, c] + e1 * X[l1, c] + e2 * X[l2, c] + e3 * X[l3, c]
+        j += 4
+    while j < hi:
+        e, l = val[j], col[j]
         for c in range(W):
             out[c] = out[c] + e * X[l, c]
-        l += 1
+        j += 1
 
 
 @_njit
@@ -402,24 +370,26 @@ def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r):
 
 @_njit
 def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
-    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies,
-    one narrower tile for a remainder of at least :data:`MIN_TILE`, the rest copy by copy."""
+    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies, then
+    tiles of :data:`SMALL_TILE` (the last one padded with copies of its last copy, not written
+    back) while at least :data:`MIN_TILE` copies remain, the rest copy by copy."""
     b = lo
     if hi - b >= TILE:
         st, wk = _scratch_tile(ka, TILE)
         while hi - b >= TILE:
             _gather(st, b, TILE, x, z, gamma, gamma_s, v, x_r, u, r)
-            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk)
+            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, TILE)
             _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r)
             b += TILE
-    rest = hi - b
-    if rest >= MIN_TILE:
-        Wt = (rest + 7) // 8 * 8  # lanes past the remainder repeat its last copy and are not written back
-        st, wk = _scratch_tile(ka, Wt)
-        _gather(st, b, rest, x, z, gamma, gamma_s, v, x_r, u, r)
-        period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk)
-        _scatter(st, b, rest, x, z, gamma, gamma_s, v, x_r)
-    elif rest > 0:
+    if hi - b >= MIN_TILE:
+        st, wk = _scratch_tile(ka, SMALL_TILE)
+        while hi - b >= MIN_TILE:
+            nl = min(SMALL_TILE, hi - b)
+            _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
+            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, SMALL_TILE)
+            _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r)
+            b += nl
+    if hi > b:
         sc = _scratch_copy(ka)
         for c in range(b, hi):
             period_copy(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc)
@@ -451,25 +421,31 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
     return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_tuple)
 
 
-def flops_per_period(p) -> int:
+def flops_per_period(p, *, dense: bool = False) -> int:
     """Floating-point operations of one control period of one copy (an FMA counts 2).
 
     Counted from the loops of :func:`period_copy` with the parameters ``p``
-    (:class:`~dobs_envs.sim.state.SimParams`): padded output rows and the sparse
-    neighbour lists as the kernel runs them; square roots and divisions count 1.
+    (:class:`~dobs_envs.sim.state.SimParams`): the stored entries of the row-compressed
+    matrices (``dense=True``: every entry, as a dense kernel would), the sparse neighbour
+    lists; square roots and divisions count 1.
     """
     N, n, m, mv = p.n_nodes, p.n_states, p.n_inputs, p.n_unknown
     P, rq = p.C.shape[1], p.Q_proj.shape[2]
-    nnz = int(np.count_nonzero(p.nbr_w))
-    held = 2 * (N * n * m + 2 * n * m)
-    sub = (2 * N * P * n  # y
-           + 2 * N * n * P  # xhat
-           + N * n + 2 * nnz * n  # d
-           + 2 * N * rq * n + 2 * N * n * rq + N * n * (0 if np.all(p.proj_range) else 1) + 2 * N * n  # w, ||w||^2
+    if dense:
+        nnz = [N * n * m, n * m, N * P * n, N * n * P, N * rq * n, N * n * rq, N * n * n, N * n * P, n * n, n * mv,
+               n * n, mv * mv]
+    else:
+        nnz = [int(rows[0][-1]) for rows in p.kernel_args.rows]
+    BB, BU, CC, GG, QT, QQ, EE, FF, AA, BV, AR, PV = nnz
+    nbr = int(np.count_nonzero(p.nbr_w))
+    held = 2 * (BB + 2 * BU)
+    sub = (2 * CC + 2 * GG  # y, xhat
+           + N * n + 2 * nbr * n  # d
+           + 2 * QT + 2 * QQ + N * n * (0 if np.all(p.proj_range) else 1) + 2 * N * n  # w, ||w||^2
            + 3 * N  # sqrt, division, gain
-           + N * n * (2 + 2 * n + 2 * P + 2)  # z update
+           + 2 * N * n + 2 * EE + 2 * FF + 2 * N * n  # z update: bu - coef w, Ebar z, Fbar y, Euler step
            + 8 * N  # adaptive gains
-           + 2 * n * n + 2 * n * mv + 2 * n  # plant
-           + (2 * n * n + 2 * n if p.has_reference else 0)  # reference model
-           + 2 * mv * mv)  # exosystem
+           + 2 * AA + 2 * BV + 2 * n  # plant
+           + (2 * AR + 2 * n if p.has_reference else 0)  # reference model
+           + 2 * PV)  # exosystem
     return int(held + p.substeps * sub)
