@@ -597,7 +597,11 @@ class DObsParallelEnv(ParallelEnv):
         """Global state for centralised critics: ``(x, x_r, xhat_0..xhat_{N-1}, v)`` flattened (see :meth:`state_layout`)."""
         if self._sim is None:
             raise RuntimeError("call reset() before state()")
-        return self._f[self._state_index].astype(self.obs_dtype)
+        with np.errstate(over="ignore"):  # a cleaned +-1.8e308 becomes +-inf in float32: cleaned again below
+            out = self._f[self._state_index].astype(self.obs_dtype)
+        if self._terminated:
+            np.nan_to_num(out, copy=False)
+        return out
 
     def estimation_errors(self) -> np.ndarray:
         """``||xhat_i - x||`` for every observer node (copy)."""

@@ -1,8 +1,35 @@
 """numba-compiled control period: the hot path of every environment.
 
-Same arithmetic, in the same order of terms, as :func:`.numpy_step.control_period_numpy`
-(see its docstring for the equations); the two are tested against each other.
-Arrays are updated in place on copies made by :func:`control_period_compiled`.
+Same operations as :func:`.numpy_step.control_period_numpy` (see its docstring for
+the equations); the two are tested against each other.
+
+Sparse rows
+-----------
+The paper's design matrices are sparse (NE2: 55 of the 486 entries of ``Ebar`` are
+nonzero, 8 of the 81 of ``A``): every matrix-vector product runs over the stored entries
+of row-compressed matrices (:attr:`KernelArgs.rows <dobs_envs.sim.state.KernelArgs>`,
+:func:`~dobs_envs.sim.state.compress_rows`), each sum in column order. Skipping exact zeros
+leaves every finite result unchanged (``fma(0, x, s) = s``) and halves NE2's flops
+(:func:`flops_per_period`).
+
+Two layouts of the same arithmetic
+----------------------------------
+- :func:`period_copy` advances one copy ``b`` of a batch-first state
+  (``x (B, n)``, ``z (B, N, n)``, ...): scalar code, one loop over the stored entries of
+  each matrix (no data-dependent inner loops).
+- :func:`period_tile` advances a *tile* of ``W`` copies stored with the copy axis
+  **innermost** (``X (n, W)``, ``Z (N, n, W)``, ...): every statement is a loop over
+  the ``W`` copies, which the compiler turns into SIMD instructions across copies
+  (``W`` is a compile-time constant: :data:`TILE` or :data:`SMALL_TILE`).
+
+:func:`advance_rows` cuts a range of copies into tiles of :data:`TILE` copies
+(gathered from / scattered back to the batch-first arrays), then tiles of
+:data:`SMALL_TILE` (the last one padded) while at least :data:`MIN_TILE` copies remain,
+and runs the rest copy by copy. Every copy's arithmetic is identical in both layouts --
+each sum is accumulated in the same order, term by term, and :data:`FASTMATH` allows only
+FMA contraction -- so a copy's trajectory does not depend on the batch size or on its
+position in the batch (tested bit for bit).
+
 The constants arrive as one :class:`~dobs_envs.sim.state.KernelArgs` tuple
 (``SimParams.kernel_tuple``, built once per parameter set).
 """
@@ -10,17 +37,26 @@ from __future__ import annotations
 
 import numpy as np
 
-#: LLVM fast-math flags of the kernel: reassociation and contraction (FMA) but *not*
-#: ``nnan``/``ninf``, so NaN and inf propagate as IEEE arithmetic says (an overflowing
-#: observer yields a non-finite state the environment detects and terminates on,
-#: instead of undefined behaviour). Measured on NE2 (50 substeps, 1 env): ~36-38 us per
-#: control period with these flags, ~41 us with ``fastmath=True``, ~43 us without fastmath.
-FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+#: LLVM fast-math flags of the kernel: FMA contraction (``contract``) only. Not ``reassoc``
+#: (a copy's sums must not be reordered differently in the scalar and the tiled layout),
+#: not ``nsz`` (``0.0 + a*b`` must stay an FMA with 0, never a bare product that a following
+#: addition could contract either way), not ``nnan``/``ninf`` (NaN and inf propagate as IEEE
+#: arithmetic says: an overflowing observer yields a non-finite state the environment
+#: detects and terminates on, instead of undefined behaviour).
+FASTMATH = {"contract"}
+#: Copies per SIMD tile of :func:`advance_rows` (NE2, one core: 5.4 us per copy and control step
+#: at 128, 6.1 at 64; 256 was slower than 128 in the dense kernel).
+TILE = 128
+#: Copies per tile of a remainder of fewer than TILE copies.
+SMALL_TILE = 64
+#: Fewest remaining copies run as a (padded) small tile, fewer run one by one (the cost crossover on NE2).
+MIN_TILE = 14
 
 try:  # numba is a hard dependency, but keep the package importable without it
     import numba
 
     _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy")
+    _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
     HAVE_NUMBA = True
 except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
@@ -28,132 +64,335 @@ except ImportError:  # pragma: no cover
     def _njit(f):
         return f
 
+    _njit_inline = _njit
 
-__all__ = ["HAVE_NUMBA", "FASTMATH", "control_period_compiled"]
+
+__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "SMALL_TILE", "MIN_TILE", "period_copy", "period_tile", "advance_rows",
+           "control_period_compiled", "flops_per_period"]
 
 
 @_njit
-def _control_period(x, z, gamma, gamma_s, v, x_r, u, r, ka):
-    """One control period in place. State ``x (B, n)``, ``z (B, N, n)``, ``gamma``/``gamma_s (B, N)``,
-    ``v (B, m_v)``, ``x_r (B, n)``; held ``u``/``r (B, m)``; ``ka``: the fields of
-    :class:`~dobs_envs.sim.state.KernelArgs`, in its order (``SimParams.kernel_tuple``)."""
+def _scratch_copy(ka):
+    """Work arrays of :func:`period_copy` (allocated once per batch call)."""
+    C, E_bar, Q_proj, B_v = ka[3], ka[4], ka[8], ka[2]
+    N, n, p, rq, mv = E_bar.shape[0], E_bar.shape[1], C.shape[1], Q_proj.shape[2], B_v.shape[1]
+    return (np.empty(N * p), np.empty(N * n), np.empty(N * n), np.empty(N * rq), np.empty(N * n), np.empty(N * n),
+            np.empty(n), np.empty(n), np.empty(N * n), np.empty(n), np.empty(n), np.empty(mv), np.empty(N),
+            np.empty(N), np.empty(N))
+
+
+@_njit_inline
+def _terms(out, rows, vec):
+    """``out[row[j]] += val[j] * vec[gcol[j]]`` over every stored entry ``j`` of a row-compressed
+    matrix: each output row sums its terms in column order (one loop over all entries, no
+    data-dependent inner loops)."""
+    ptr, col, val, row, gcol = rows
+    for j in range(val.shape[0]):
+        q = row[j]
+        out[q] = out[q] + val[j] * vec[gcol[j]]
+
+
+@_njit
+def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
+    """One control period of copy ``b`` in place (batch-first arrays, see module doc).
+
+    ``x (B, n)``, ``z (B, N, n)``, ``gamma``/``gamma_s (B, N)``, ``v (B, m_v)``, ``x_r (B, n)``;
+    held ``u``/``r (B, m)``; ``ka`` the :class:`~dobs_envs.sim.state.KernelArgs` fields in
+    order; ``sc`` the work arrays of :func:`_scratch_copy`. Every matrix-vector product runs
+    over the stored entries of a row-compressed matrix (``ka.rows``), each output summing its
+    terms in column order, as :func:`period_tile` does per copy.
+    """
     (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference) = ka  # = KernelArgs._fields
-    nb, N, n = z.shape
-    p = C.shape[1]
-    m = B.shape[1]
-    mv = B_v.shape[1]
-    y = np.empty((N, p))
-    rq = Q_proj.shape[2]
-    maxdeg = nbr_idx.shape[1]
-    xhat = np.empty((N, n))
-    d = np.empty((N, n))
-    w = np.empty(n)
-    cq = np.empty(rq)
-    bu = np.empty((N, n))
-    Bu = np.empty(n)
-    Br = np.empty(n)
-    znew = np.empty(n)
-    xdot = np.empty(n)
-    xrdot = np.empty(n)
-    vnew = np.empty(mv)
-    for b in range(nb):
-        # held inputs (ZOH over the control period)
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka  # = KernelArgs._fields
+    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows  # = ROW_MATRICES
+    y, xhat, d, cq, w, bu, Bu, Br, zn, xdot, xrdot, vnew, nwv, nw2v, coef = sc
+    N, n = z.shape[1], z.shape[2]
+    p, mv = C.shape[1], B_v.shape[1]
+    rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    xb, xrb, vb, ub, rb = x[b], x_r[b], v[b], u[b], r[b]
+    zb = z[b].reshape(N * n)  # node i's state at i * n
+    # held inputs (ZOH over the control period): Bbar_i u, B u, B r
+    bu[:] = 0.0
+    _terms(bu, BBr, ub)
+    Bu[:] = 0.0
+    _terms(Bu, BUr, ub)
+    Br[:] = 0.0
+    _terms(Br, BUr, rb)
+    for _ in range(substeps):
+        # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
+        for q in range(N * p):
+            y[q] = 0.0
+        _terms(y, CCr, xb)
+        for q in range(N * n):
+            xhat[q] = zb[q]
+        _terms(xhat, GGr, y)
+        # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
         for i in range(N):
             for k in range(n):
-                s = 0.0
-                for j in range(m):
-                    s += B_bar[i, k, j] * u[b, j]
-                bu[i, k] = s
-        for k in range(n):
-            s = 0.0
-            s2 = 0.0
-            for j in range(m):
-                s += B[k, j] * u[b, j]
-                s2 += B[k, j] * r[b, j]
-            Bu[k] = s
-            Br[k] = s2
-        for _ in range(substeps):
-            # y_i = C_i x ; xhat_i = z_i + Gbar_i y_i
-            for i in range(N):
-                for q in range(p):
-                    s = 0.0
+                d[i * n + k] = deg[i] * xhat[i * n + k]
+            for q in range(maxdeg):
+                a = nbr_w[i, q]
+                if a != 0.0:
+                    jn = nbr_idx[i, q] * n
                     for k in range(n):
-                        s += C[i, q, k] * x[b, k]
-                    y[i, q] = s
-                for k in range(n):
-                    s = z[b, i, k]
-                    for q in range(p):
-                        s += G_bar[i, k, q] * y[i, q]
-                    xhat[i, k] = s
-            # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
-            for i in range(N):
-                for k in range(n):
-                    d[i, k] = deg[i] * xhat[i, k]
-                for q in range(maxdeg):
-                    a = nbr_w[i, q]
-                    if a != 0.0:
-                        j = nbr_idx[i, q]
-                        for k in range(n):
-                            d[i, k] -= a * xhat[j, k]
-            for i in range(N):
-                # w = P_u,i d_i through the thinner of the two bases:
-                # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
-                for c in range(rq):
-                    s = 0.0
-                    for l in range(n):
-                        s += Q_proj[i, l, c] * d[i, l]
-                    cq[c] = s
-                rng_ = proj_range[i]
-                nw2 = 0.0
-                for k in range(n):
-                    s = 0.0
-                    for c in range(rq):
-                        s += Q_proj[i, k, c] * cq[c]
-                    if not rng_:
-                        s = d[i, k] - s
-                    w[k] = s
-                    nw2 += s * s
-                nw = np.sqrt(nw2)
-                g = gamma[b, i]
-                gs = gamma_s[b, i]
-                coef = g + (gs / nw if nw > 0.0 else 0.0)
-                for k in range(n):
-                    s = bu[i, k] - coef * w[k]
-                    for l in range(n):
-                        s += E_bar[i, k, l] * z[b, i, l]
-                    for q in range(p):
-                        s += F_bar[i, k, q] * y[i, q]
-                    znew[k] = z[b, i, k] + dt * s
-                for k in range(n):
-                    z[b, i, k] = znew[k]
-                gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2)
-                gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nw)
-            # plant and reference model
+                        d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
+        # w_i = P_u,i d_i through the thinner of the two bases:
+        # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
+        for q in range(N * rq):
+            cq[q] = 0.0
+        _terms(cq, QTr, d)
+        for q in range(N * n):
+            w[q] = 0.0
+        _terms(w, QQr, cq)
+        for i in range(N):
+            nw2 = 0.0
             for k in range(n):
-                s = Bu[k]
-                for l in range(n):
-                    s += A[k, l] * x[b, l]
-                for j in range(mv):
-                    s += B_v[k, j] * v[b, j]
-                xdot[k] = s
-            if has_reference:
-                for k in range(n):
-                    s = Br[k]
-                    for l in range(n):
-                        s += A_r[k, l] * x_r[b, l]
-                    xrdot[k] = s
-                for k in range(n):
-                    x_r[b, k] += dt * xrdot[k]
+                s = w[i * n + k]
+                if not proj_range[i]:
+                    s = d[i * n + k] - s
+                w[i * n + k] = s
+                nw2 = nw2 + s * s
+            nw = np.sqrt(nw2)
+            nwv[i] = nw
+            nw2v[i] = nw2
+            coef[i] = gamma[b, i] + (gamma_s[b, i] / nw if nw > 0.0 else 0.0)  # eq. (H_idefine), h(0) = 0
+        # eq. (zidynamic) for every node
+        for i in range(N):
+            ci = coef[i]
             for k in range(n):
-                x[b, k] += dt * xdot[k]
-            for j in range(mv):
-                s = 0.0
-                for l in range(mv):
-                    s += Phi_v[j, l] * v[b, l]
-                vnew[j] = s
-            for j in range(mv):
-                v[b, j] = vnew[j]
+                zn[i * n + k] = bu[i * n + k] - ci * w[i * n + k]
+        _terms(zn, EEr, zb)
+        _terms(zn, FFr, y)
+        for q in range(N * n):
+            zb[q] = zb[q] + dt * zn[q]
+        # eqs. (gammaiis)/(gagasbeta)
+        for i in range(N):
+            g = gamma[b, i]
+            gs = gamma_s[b, i]
+            gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2v[i])
+            gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nwv[i])
+        # eq. (LTIsys) plant and eq. (refxdy) reference model
+        for k in range(n):
+            xdot[k] = Bu[k]
+        _terms(xdot, AAr, xb)
+        _terms(xdot, BVr, vb)
+        if has_reference:
+            for k in range(n):
+                xrdot[k] = Br[k]
+            _terms(xrdot, ARr, xrb)
+            for k in range(n):
+                xrb[k] = xrb[k] + dt * xrdot[k]
+        for k in range(n):
+            xb[k] = xb[k] + dt * xdot[k]
+        # exosystem v <- expm(S dt) v
+        for j in range(mv):
+            vnew[j] = 0.0
+        _terms(vnew, PVr, vb)
+        for j in range(mv):
+            vb[j] = vnew[j]
+
+
+@_njit
+def _scratch_tile(ka, W):
+    """Tile state (X, Z, G, GS, V, XR, U, R) and work arrays of :func:`period_tile` for ``W`` copies."""
+    B, C, E_bar, Q_proj, B_v = ka[1], ka[3], ka[4], ka[8], ka[2]
+    N, n, p, rq, mv, m = E_bar.shape[0], E_bar.shape[1], C.shape[1], Q_proj.shape[2], B_v.shape[1], B.shape[1]
+    state = (np.empty((n, W)), np.empty((N, n, W)), np.empty((N, W)), np.empty((N, W)), np.empty((mv, W)),
+             np.empty((n, W)), np.empty((m, W)), np.empty((m, W)))
+    work = (np.empty((N, p, W)), np.empty((N, n, W)), np.empty((N, n, W)), np.empty((rq, W)), np.empty((n, W)),
+            np.empty((N, n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)),
+            np.empty((n, W)), np.empty((mv, W)), np.empty(W), np.empty(W), np.empty(W))
+    return state, work
+
+
+@_njit
+def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
+    """One control period of a tile of ``W`` copies, copy axis last, in place.
+
+    ``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``, ``XR (n, W)``,
+    ``U``/``R (m, W)``; ``W`` must be a compile-time constant (:data:`TILE`, :data:`SMALL_TILE`).
+    Per copy the same operations in the same order as :func:`period_copy`; the innermost
+    loops run over the copies (SIMD), each pass over the copies adding up to four terms.
+    """
+    numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
+    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
+    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows
+    Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw = work
+    N, n = Z.shape[0], Z.shape[1]
+    p, mv = C.shape[1], B_v.shape[1]
+    rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    for i in range(N):
+        for k in range(n):
+            _tile_dot(BU[i, k], None, BBr, i * n + k, U, W)
+    for k in range(n):
+        _tile_dot(Bu[k], None, BUr, k, U, W)
+        _tile_dot(Br[k], None, BUr, k, R, W)
+    for _ in range(substeps):
+        for i in range(N):
+            for q in range(p):
+                _tile_dot(Y[i, q], None, CCr, i * p + q, X, W)
+            for k in range(n):
+                _tile_dot(XH[i, k], Z[i, k], GGr, i * n + k, Y[i], W)
+        for i in range(N):
+            dg = deg[i]
+            for k in range(n):
+                for c in range(W):
+                    D[i, k, c] = dg * XH[i, k, c]
+            for q in range(maxdeg):
+                a = nbr_w[i, q]
+                if a != 0.0:
+                    j = nbr_idx[i, q]
+                    for k in range(n):
+                        for c in range(W):
+                            D[i, k, c] = D[i, k, c] - a * XH[j, k, c]
+        for i in range(N):
+            for c_ in range(rq):
+                _tile_dot(CQ[c_], None, QTr, i * rq + c_, D[i], W)
+            for c in range(W):
+                nw2[c] = 0.0
+            rng_ = proj_range[i]
+            for k in range(n):
+                _tile_dot(Wv[k], None, QQr, i * n + k, CQ, W)
+                if rng_:
+                    for c in range(W):
+                        nw2[c] = nw2[c] + Wv[k, c] * Wv[k, c]
+                else:
+                    for c in range(W):
+                        w = D[i, k, c] - Wv[k, c]
+                        Wv[k, c] = w
+                        nw2[c] = nw2[c] + w * w
+            for c in range(W):
+                nw[c] = np.sqrt(nw2[c])
+                coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
+            for k in range(n):
+                for c in range(W):
+                    ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
+                _tile_dot(ZN[k], ZN[k], EEr, i * n + k, Z[i], W)
+                _tile_dot(ZN[k], ZN[k], FFr, i * n + k, Y[i], W)
+                for c in range(W):
+                    ZN[k, c] = Z[i, k, c] + dt * ZN[k, c]
+            for k in range(n):
+                for c in range(W):
+                    Z[i, k, c] = ZN[k, c]
+            sg, ph, sgs, phs = sigma[i], phi[i], sigma_s[i], phi_s[i]
+            for c in range(W):
+                g = G[i, c]
+                gs = GS[i, c]
+                G[i, c] = g + dt * (-sg * g + ph * nw2[c])
+                GS[i, c] = gs + dt * (-sgs * gs + phs * nw[c])
+        for k in range(n):
+            _tile_dot(XD[k], Bu[k], AAr, k, X, W)
+            if mv:
+                _tile_dot(XD[k], XD[k], BVr, k, V, W)
+        if has_reference:
+            for k in range(n):
+                _tile_dot(XRD[k], Br[k], ARr, k, XR, W)
+            for k in range(n):
+                for c in range(W):
+                    XR[k, c] = XR[k, c] + dt * XRD[k, c]
+        for k in range(n):
+            for c in range(W):
+                X[k, c] = X[k, c] + dt * XD[k, c]
+        for j in range(mv):
+            _tile_dot(VN[j], None, PVr, j, V, W)
+        for j in range(mv):
+            for c in range(W):
+                V[j, c] = VN[j, c]
+
+
+@_njit_inline
+def _tile_dot(out, init, rows, q, X, W):
+    """``out[c] = init[c] + sum_l M[q, l] X[l, c]`` (``init`` None: 0) for the ``W`` copies ``c``,
+    ``M = rows`` row-compressed: the stored entries of row ``q`` in column order, up to four
+    per pass over the copies."""
+    ptr, col, val, _, _ = rows
+    if init is None:
+        for c in range(W):
+            out[c] = 0.0
+    else:
+        for c in range(W):
+            out[c] = init[c]
+    j, hi = ptr[q], ptr[q + 1]
+    while j + 4 <= hi:
+        e0, e1, e2, e3 = val[j], val[j + 1], val[j + 2], val[j + 3]
+        l0, l1, l2, l3 = col[j], col[j + 1], col[j + 2], col[j + 3]
+        for c in range(W):
+            out[c] = out[c] + e0 * X[l0, c] + e1 * X[l1, c] + e2 * X[l2, c] + e3 * X[l3, c]
+        j += 4
+    while j < hi:
+        e, l = val[j], col[j]
+        for c in range(W):
+            out[c] = out[c] + e * X[l, c]
+        j += 1
+
+
+@_njit
+def _gather(state, lo, nl, x, z, gamma, gamma_s, v, x_r, u, r):
+    """Copies ``lo .. lo+nl-1`` into the tile (lanes past ``nl`` repeat the last copy)."""
+    X, Z, G, GS, V, XR, U, R = state
+    W = X.shape[1]
+    N, n = Z.shape[0], Z.shape[1]
+    for c in range(W):
+        b = lo + (c if c < nl else nl - 1)
+        for k in range(n):
+            X[k, c] = x[b, k]
+            XR[k, c] = x_r[b, k]
+        for i in range(N):
+            G[i, c] = gamma[b, i]
+            GS[i, c] = gamma_s[b, i]
+            for k in range(n):
+                Z[i, k, c] = z[b, i, k]
+        for j in range(V.shape[0]):
+            V[j, c] = v[b, j]
+        for j in range(U.shape[0]):
+            U[j, c] = u[b, j]
+            R[j, c] = r[b, j]
+
+
+@_njit
+def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r):
+    X, Z, G, GS, V, XR, U, R = state
+    N, n = Z.shape[0], Z.shape[1]
+    for c in range(nl):
+        b = lo + c
+        for k in range(n):
+            x[b, k] = X[k, c]
+            x_r[b, k] = XR[k, c]
+        for i in range(N):
+            gamma[b, i] = G[i, c]
+            gamma_s[b, i] = GS[i, c]
+            for k in range(n):
+                z[b, i, k] = Z[i, k, c]
+        for j in range(V.shape[0]):
+            v[b, j] = V[j, c]
+
+
+@_njit
+def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
+    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies, then
+    tiles of :data:`SMALL_TILE` (the last one padded with copies of its last copy, not written
+    back) while at least :data:`MIN_TILE` copies remain, the rest copy by copy."""
+    b = lo
+    if hi - b >= TILE:
+        st, wk = _scratch_tile(ka, TILE)
+        while hi - b >= TILE:
+            _gather(st, b, TILE, x, z, gamma, gamma_s, v, x_r, u, r)
+            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, TILE)
+            _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r)
+            b += TILE
+    if hi - b >= MIN_TILE:
+        st, wk = _scratch_tile(ka, SMALL_TILE)
+        while hi - b >= MIN_TILE:
+            nl = min(SMALL_TILE, hi - b)
+            _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
+            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, SMALL_TILE)
+            _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r)
+            b += nl
+    if hi > b:
+        sc = _scratch_copy(ka)
+        for c in range(b, hi):
+            period_copy(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc)
 
 
 @_njit
@@ -165,7 +404,7 @@ def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, ka):
     gamma_s = gamma_s.copy()
     v = v.copy()
     x_r = x_r.copy()
-    _control_period(x, z, gamma, gamma_s, v, x_r, u, r, ka)
+    advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, x.shape[0])
     return x, z, gamma, gamma_s, v, x_r
 
 
@@ -180,3 +419,33 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
     if r.dtype != np.float64 or not r.flags.c_contiguous:
         r = np.ascontiguousarray(r, dtype=np.float64)
     return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_tuple)
+
+
+def flops_per_period(p, *, dense: bool = False) -> int:
+    """Floating-point operations of one control period of one copy (an FMA counts 2).
+
+    Counted from the loops of :func:`period_copy` with the parameters ``p``
+    (:class:`~dobs_envs.sim.state.SimParams`): the stored entries of the row-compressed
+    matrices (``dense=True``: every entry, as a dense kernel would), the sparse neighbour
+    lists; square roots and divisions count 1.
+    """
+    N, n, m, mv = p.n_nodes, p.n_states, p.n_inputs, p.n_unknown
+    P, rq = p.C.shape[1], p.Q_proj.shape[2]
+    if dense:
+        nnz = [N * n * m, n * m, N * P * n, N * n * P, N * rq * n, N * n * rq, N * n * n, N * n * P, n * n, n * mv,
+               n * n, mv * mv]
+    else:
+        nnz = [int(rows[0][-1]) for rows in p.kernel_args.rows]
+    BB, BU, CC, GG, QT, QQ, EE, FF, AA, BV, AR, PV = nnz
+    nbr = int(np.count_nonzero(p.nbr_w))
+    held = 2 * (BB + 2 * BU)
+    sub = (2 * CC + 2 * GG  # y, xhat
+           + N * n + 2 * nbr * n  # d
+           + 2 * QT + 2 * QQ + N * n * (0 if np.all(p.proj_range) else 1) + 2 * N * n  # w, ||w||^2
+           + 3 * N  # sqrt, division, gain
+           + 2 * N * n + 2 * EE + 2 * FF + 2 * N * n  # z update: bu - coef w, Ebar z, Fbar y, Euler step
+           + 8 * N  # adaptive gains
+           + 2 * AA + 2 * BV + 2 * n  # plant
+           + (2 * AR + 2 * n if p.has_reference else 0)  # reference model
+           + 2 * PV)  # exosystem
+    return int(held + p.substeps * sub)
