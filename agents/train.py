@@ -2,8 +2,11 @@
 
 - centralised: PPO, SAC, TD3 on ``dobs_envs/<Name>-v0`` (one agent acting for all
   controller nodes) or any Gymnasium id;
-- multi-agent: PPO and SAC with one policy shared by every controller node, through
-  :class:`agents.vec_env.ParallelVecEnv` (one VecEnv slot per (copy, agent)).
+- multi-agent: PPO and SAC with one policy shared by every controller node (one VecEnv
+  slot per (copy, agent)).
+
+The dobs_envs environments train on :class:`agents.core_vec_env.CoreVecEnv` (all copies in
+one batched core, :func:`build_vec_env`).
 
 Budgets (``timesteps``) are *environment* steps: for multi-agent training SB3 counts
 one sample per agent, so the SB3 budget is ``timesteps * n_agents``.
@@ -15,6 +18,7 @@ the policy inputs) and ``checkpoints/``. :func:`load_agent` reads it back.
 from __future__ import annotations
 
 import json
+import math
 import os
 import pickle
 import time
@@ -23,10 +27,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .config import MULTI_AGENT_ALGOS, gym_factory, load_hyperparams, parallel_factory
+from dobs_envs.registry import get as registry_entry
+
+from .config import ENVS, MULTI_AGENT_ALGOS, env_key, gym_factory, load_hyperparams, parallel_factory
+from .core_vec_env import CoreVecEnv
 from .vec_env import ParallelVecEnv, SlotEncoder
 
-__all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "TqdmCallback", "set_threads"]
+__all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "core_of", "TqdmCallback", "set_threads"]
 
 _ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
 _EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise",
@@ -81,17 +88,28 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
                   residual_scale: float | None = None):
     """Monitored VecEnv for training (not normalised).
 
-    ``env`` is a name (see :mod:`agents.config`) or a constructor. Centralised envs
-    use ``DummyVecEnv`` + ``Monitor``; multi-agent ones :class:`ParallelVecEnv` +
-    ``VecMonitor``. ``normalize_actions``: the agent acts in ``[-1, 1]`` (Gymnasium's
-    ``RescaleAction`` / the adapter's ``rescale_actions``). ``residual_scale``: the
-    agent's action is a residual correction (:mod:`agents.hybrid`), already in ``[-1, 1]``.
+    ``env`` is a name (see :mod:`agents.config`) or a constructor. The dobs_envs
+    environments (by name) run as one batched core, :class:`agents.core_vec_env.CoreVecEnv`
+    + ``VecMonitor``: centralised (one slot per copy, episodes of the Gymnasium id's
+    ``max_episode_steps`` unless ``max_cycles``/``horizon`` are given) or parameter-shared
+    (one slot per (copy, agent)). Foreign Gymnasium ids and residual envs use ``DummyVecEnv``
+    + ``Monitor`` (centralised) or :class:`ParallelVecEnv` + ``VecMonitor`` (multi-agent).
+    ``normalize_actions``: the agent acts in ``[-1, 1]`` (Gymnasium's ``RescaleAction`` / the
+    adapters' ``rescale_actions``). ``residual_scale``: the agent's action is a residual
+    correction (:mod:`agents.hybrid`), already in ``[-1, 1]``.
     """
     from .hybrid import residual_factory
 
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
+    core = core_of(env, n_envs, env_kwargs, multi_agent) if residual_scale is None else None
+    if core is not None:
+        venv = VecMonitor(CoreVecEnv(core, shared=multi_agent, agent_id=agent_id and multi_agent,
+                                     rescale_actions=normalize_actions))
+        if seed is not None:
+            venv.seed(seed)
+        return venv
     if multi_agent:
         fac = parallel_factory(env, env_kwargs)
         if residual_scale is not None:
@@ -113,6 +131,29 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
         inner = fac
         fac = lambda: RescaleAction(inner(), np.float32(-1.0), np.float32(1.0))  # noqa: E731
     return make_vec_env(fac, n_envs=n_envs, seed=seed, vec_env_cls=DummyVecEnv)
+
+
+def core_of(env, n_envs: int, env_kwargs: dict | None, multi_agent: bool):
+    """The batched core of ``n_envs`` copies of the dobs_envs environment named ``env``
+    (None for constructors and foreign ids). Centralised training keeps the registered
+    Gymnasium id's episodes: truncation after ``max_episode_steps`` (or the given
+    ``max_cycles``/``horizon``), the termination penalty charging the scenario's ``t_end``."""
+    if not isinstance(env, str):
+        return None
+    names = {gid: name for name, (gid, _) in ENVS.items()}
+    name = env_key(env) if env_key(env) in ENVS else names.get(env)
+    if name is None:
+        return None
+    entry = registry_entry(name)
+    kw = dict(env_kwargs or {})
+    if multi_agent:
+        return entry.load_class().make_core(n_envs, **kw)
+    mc, hz = kw.pop("max_cycles", None), kw.pop("horizon", None)
+    core = entry.load_class().make_core(n_envs, horizon=math.inf, **kw)
+    if hz is not None:
+        mc = max(1, int(round(float(hz) / core.control_period)))
+    core.max_cycles = entry.max_episode_steps if mc is None else int(mc)
+    return core
 
 
 class TqdmCallback:
@@ -207,8 +248,9 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     norm_act = bool(hp.get("normalize_actions", False)) and residual_scale is None
     venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id,
                          normalize_actions=norm_act, residual_scale=residual_scale)
-    if norm_act and not multi_agent:
-        inner_space = venv.envs[0].unwrapped.action_space  # the env's own bounds, for evaluation
+    if norm_act and not multi_agent:  # the env's own bounds, for evaluation
+        inner = venv.unwrapped
+        inner_space = inner.env_action_space if isinstance(inner, CoreVecEnv) else inner.envs[0].unwrapped.action_space
         act_low, act_high = inner_space.low.tolist(), inner_space.high.tolist()
     else:
         act_low = act_high = None

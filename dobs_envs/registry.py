@@ -17,7 +17,7 @@ __all__ = ["DEFAULT_DT", "DEFAULT_SUBSTEPS", "DEFAULT_CONTROL_PERIOD", "EnvEntry
            "get"]
 
 #: Default Euler step (s) and Euler steps per control step of every environment
-#: (the ``dt``/``substeps`` defaults of :data:`dobs_envs.envs.base.COMMON_OPTIONS`).
+#: (the ``dt``/``substeps`` defaults of :class:`dobs_envs.envs.options.EnvOptions`).
 DEFAULT_DT = 1e-3
 DEFAULT_SUBSTEPS = 50
 #: Default control period (s): 0.05.
@@ -55,6 +55,11 @@ class EnvEntry:
         """The Gymnasium entry point: ``dobs_envs.envs.centralized:make_<name>``."""
         return f"dobs_envs.envs.centralized:make_{self.name}"
 
+    @property
+    def gym_vector_entry_point(self) -> str:
+        """The Gymnasium ``vector_entry_point``: ``dobs_envs.envs.vector:make_vec_<name>``."""
+        return f"dobs_envs.envs.vector:make_vec_{self.name}"
+
     def load_class(self) -> type:
         """Import and return the ParallelEnv class named by :attr:`entry_point`."""
         mod, cls = self.entry_point.split(":")
@@ -79,7 +84,8 @@ ENVIRONMENTS = _entries(
              "seeded random plant (dobs_envs.scenarios.random.random_plant_scenario; Scenario.t_end default)"),
 )
 
-#: Gymnasium id -> (entry point, max_episode_steps), as registered by :mod:`dobs_envs`.
+#: Gymnasium id -> (entry point, max_episode_steps), as registered by :mod:`dobs_envs`
+#: (each id also has the vector entry point :attr:`EnvEntry.gym_vector_entry_point`).
 GYM_IDS = {e.gym_id: (e.gym_entry_point, e.max_episode_steps) for e in ENVIRONMENTS.values()}
 
 

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from dobs_envs import disturbance_rejection_v0, tracking_v0
+from dobs_envs.envs import REASONS
+from dobs_envs.envs.features import write_features
 from dobs_envs.envs.numpy_features import write_features_reference
-from dobs_envs.envs.observation import write_features_packed
 
 
 def _assert_clean_termination(env, obs, rew, term, trunc, info):
@@ -38,17 +39,38 @@ def test_overflowing_observer_terminates_through_the_public_api(obs_dtype):
     _assert_clean_termination(env, *out)
 
 
+def _inject(env, field, bad):
+    """Put ``bad`` into one entry of the simulation state through the core's public setter."""
+    s = env.sim_state
+    arr = getattr(s, field).copy()
+    arr.flat[arr.size // 2] = bad
+    env.core.set_sim_state(s.replace(**{field: arr}))
+
+
 @pytest.mark.parametrize("field", ["x", "z", "gamma", "gamma_s", "v", "x_r"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_injected_non_finite_value_terminates(field, bad):
     env = disturbance_rejection_v0.parallel_env() if field == "v" else tracking_v0.parallel_env()
     env.reset(seed=1)
-    s = env.sim_state
-    arr = getattr(s, field).copy()
-    arr.flat[arr.size // 2] = bad
-    env._sim = s.replace(**{field: arr})  # inject (no public setter for the simulation state)
+    _inject(env, field, bad)
     out = env.step({a: np.zeros(env.action_space(a).shape, np.float32) for a in env.possible_agents})
     _assert_clean_termination(env, *out)
+
+
+def test_core_reports_the_reason_code_per_copy():
+    from dobs_envs.envs import DObsVectorEnv, TrackingEnv
+
+    venv = DObsVectorEnv(TrackingEnv, 3, state_bound=50.0)
+    venv.reset(seed=0)
+    s = venv.core.sim_state
+    s.z[1, 2, 3] = np.nan  # copy 1: non-finite observer state
+    s.x[2] *= 100.0  # copy 2: beyond the state bound
+    venv.core.set_sim_state(s)
+    obs, rew, term, trunc, info = venv.step(np.zeros((3, 5), np.float32))
+    np.testing.assert_array_equal(term, [False, True, True])
+    np.testing.assert_array_equal(info["termination_reason"], [0, 2, 1])
+    assert [REASONS[int(c)] for c in info["termination_reason"]] == [None, "non_finite_state", "state_bound_exceeded"]
+    assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rew))
 
 
 def test_gymnasium_view_terminates_cleanly():
@@ -65,16 +87,19 @@ def test_gymnasium_view_terminates_cleanly():
 def test_kernel_finiteness_flag(field):
     env = disturbance_rejection_v0.parallel_env()
     env.reset(seed=2)
+    core = env.core
     s = env.sim_state
-    L = env.layout
+    L = core.layout
 
     def flags(state):
         res = []
-        for fn in (write_features_packed, write_features_reference):
-            W = np.zeros(L.size + env.n_nodes + env.n_inputs)
-            out = np.empty(L.all_index.size)
-            res.append(fn(state.x, state.z, state.x_r, state.gamma, state.gamma_s, state.v, float(state.t[0]),
-                          W, env._SF, env._SI, env.has_reference, out)[3])
+        for fn in (write_features, write_features_reference):
+            W = np.zeros((1, L.size + core.n_nodes + core.n_inputs))
+            obs = np.zeros((1, core.n_agents, core.obs_dim))
+            fin = np.zeros(1, bool)
+            fn(state.x, state.z, state.x_r, state.gamma, state.gamma_s, state.v, state.t, W, *_static_nr(core),
+               False, obs, np.array([0]), np.zeros(1), np.zeros(1), np.zeros(1), fin)
+            res.append(bool(fin[0]))
         return res
 
     assert flags(s) == [True, True]
@@ -82,3 +107,12 @@ def test_kernel_finiteness_flag(field):
         arr = getattr(s, field).copy()
         arr.flat[-1] = bad
         assert flags(s.replace(**{field: arr})) == [False, False]
+
+
+def _static_nr(core):
+    """Static kernel arrays of a system without reference (NE3)."""
+    from dobs_envs.envs.features import pack_static
+
+    p, L, sc = core.params, core.layout, core.scenario
+    return pack_static(p.C, p.G_bar, np.zeros((3, core.n_inputs)), core.Q, core.R,
+                       L.offsets([c.shape[0] for c in sc.C]), L.padded_index, L.size)

@@ -1,7 +1,9 @@
-"""Gymnasium view of the environments: one centralised agent.
+"""Gymnasium view of the environments: one centralised agent (a thin adapter).
 
-:class:`CentralizedEnv` wraps a :class:`~dobs_envs.envs.base.DObsParallelEnv`
-and shares its core (no per-step dict round trip):
+:class:`CentralizedEnv` wraps a :class:`~dobs_envs.envs.base.DObsParallelEnv` and
+drives its batch-size-1 :class:`~dobs_envs.envs.core.EnvCore` directly (no per-step
+dict round trip); the parallel env's diagnostics (``state()``, ``estimation_errors()``,
+``task_error()``, ``sim_state``, ``applied_input``) follow the Gymnasium episode:
 
 - observation: the agents' local observations concatenated in agent order
   (``controller_0`` first), ``Box(float32)``; ``env.agent_observation_slices[k]``
@@ -33,7 +35,8 @@ id                                     parallel env                  max_episode
 (seconds at the default control period 0.05 s; with other ``dt``/``substeps``
 pass ``max_episode_steps=`` to ``gym.make``). ``max_cycles``/``horizon`` are
 not accepted by ``gym.make``; :func:`make_gym_env` (any Scenario, no
-``TimeLimit``) accepts them.
+``TimeLimit``) accepts them. ``gym.make_vec(id, num_envs=B)`` builds the native
+vector env of the same id (:mod:`dobs_envs.envs.vector`).
 """
 from __future__ import annotations
 
@@ -43,12 +46,26 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .base import DObsParallelEnv
-from .observation import clip_inplace
-
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
+from .base import DObsParallelEnv
+from .core import REASONS
 
-__all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS"] + [f"make_{name}" for name in ENVIRONMENTS]
+__all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "reject_horizon_options"] + [f"make_{name}" for name in ENVIRONMENTS]
+
+
+def central_spaces(core):
+    """``(observation Box, action Box, agent observation slices)`` of the centralised view of ``core``:
+    the agents' observations concatenated in agent order, all inputs stacked."""
+    lows, highs, sl, pos = [], [], [], 0
+    for k, w in enumerate(core.obs_widths):
+        lo, hi = core.observation_bounds(k)
+        lows.append(lo)
+        highs.append(hi)
+        sl.append(slice(pos, pos + int(w)))
+        pos += int(w)
+    b = core.action_bound.astype(np.float32)
+    return (spaces.Box(np.concatenate(lows), np.concatenate(highs), dtype=core.obs_dtype),
+            spaces.Box(-b, b, dtype=np.float32), tuple(sl))
 
 
 class CentralizedEnv(gym.Env):
@@ -57,24 +74,16 @@ class CentralizedEnv(gym.Env):
     def __init__(self, parallel_env: DObsParallelEnv):
         if not isinstance(parallel_env, DObsParallelEnv):
             raise TypeError(f"CentralizedEnv wraps a DObsParallelEnv, got {type(parallel_env).__name__}")
-        pe = parallel_env
-        self.parallel_env = pe
+        self.parallel_env = pe = parallel_env
+        self.core = c = pe.core
         self.metadata = {"render_modes": list(pe.metadata["render_modes"]), "render_fps": pe.metadata["render_fps"],
                          "name": pe.metadata["name"]}
         self.render_mode = pe.render_mode
         self.agents = list(pe.possible_agents)
-        lows, highs, sl, pos = [], [], [], 0
-        for a in self.agents:
-            sp = pe.observation_space(a)
-            lows.append(sp.low); highs.append(sp.high)
-            sl.append(slice(pos, pos + sp.shape[0])); pos += sp.shape[0]
-        self.agent_observation_slices = tuple(sl)
-        self.agent_action_slices = tuple(pe.channel_slices)
-        self.observation_space = spaces.Box(np.concatenate(lows), np.concatenate(highs), dtype=pe.obs_dtype)
-        b = pe.action_bound.astype(np.float32)
-        self.action_space = spaces.Box(-b, b, dtype=np.float32)
-        self._index = pe.layout.all_index
-        self._m = pe.n_inputs
+        self.observation_space, self.action_space, self.agent_observation_slices = central_spaces(c)
+        self.agent_action_slices = tuple(c.channel_slices)
+        self._cat = c.layout.concat_index
+        self._u = np.zeros((1, c.n_inputs))
 
     # ------------------------------------------------------------------ API
     def observation_layout(self) -> dict:
@@ -87,40 +96,39 @@ class CentralizedEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        pe = self.parallel_env
-        pe._np_random = self.np_random  # one generator for the episode distribution
+        self.core.set_generator(0, self.np_random)  # one generator for the episode distribution
         if seed is not None:
             self.action_space.seed(int(seed))
-        pe.reset(options=options)
-        return pe._obs_all, self._info()
+        self.core.reset(None, None, options)
+        return self._obs(), self._info()
 
     def step(self, action):
-        pe = self.parallel_env
-        if pe._sim is None:
+        if not self.core.started:
             raise RuntimeError("call reset() before step()")
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"action must be a numeric array of shape ({self._m},), got {action!r}") from None
-        if a.shape != (self._m,):
-            raise ValueError(f"action must have shape ({self._m},) (all agents' inputs stacked), got {a.shape}")
-        u = pe._u0
-        u[:] = a
-        if not clip_inplace(u, pe._u_low, pe._u_high):
-            bad = [ag for ag, s in zip(self.agents, self.agent_action_slices) if not np.isfinite(a[s]).all()]
-            raise ValueError(f"action contains NaN or inf in the channel(s) of agent(s) {bad}")
-        pe._advance()
-        term = pe._terminated
-        trunc = (not term) and pe.max_cycles is not None and pe._cycles >= pe.max_cycles
+            raise ValueError(f"action must be a numeric array of shape ({self._u.shape[1]},), got {action!r}") from None
+        if a.shape != self._u.shape[1:]:
+            raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
+        self._u[0] = a
+        res = self.core.advance(self._u)
+        term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
         info = self._info()
         if term:
-            info["termination_reason"] = pe._reason
-        return pe._obs_all, pe._reward, term, trunc, info
+            info["termination_reason"] = REASONS[int(res.reason[0])]
+        return self._obs(), float(res.reward[0]), term, trunc, info
+
+    def _obs(self) -> np.ndarray:
+        return self.core.observations[0].reshape(-1)[self._cat]  # a new array
 
     def _info(self) -> dict:
-        pe = self.parallel_env
-        return {"tracking_error": pe._track_err, "estimation_errors": pe._est_err.copy(),
-                "gamma": pe._sim.gamma[0].copy(), "gamma_s": pe._sim.gamma_s[0].copy(), **pe._shared_info()}
+        c = self.core
+        info = {"tracking_error": float(c.tracking_errors[0]), "estimation_errors": c.estimation_errors[0].copy(),
+                "gamma": c.gamma[0].copy(), "gamma_s": c.gamma_s[0].copy()}
+        if c.task_error_key is not None:
+            info[c.task_error_key] = float(c.task_errors()[0])
+        return info
 
     def render(self):
         return self.parallel_env.render()
@@ -134,11 +142,11 @@ class CentralizedEnv(gym.Env):
 
     @property
     def scenario(self):
-        return self.parallel_env.scenario
+        return self.core.scenario
 
     @property
     def control_period(self) -> float:
-        return self.parallel_env.control_period
+        return self.core.control_period
 
 
 def make_gym_env(scenario, **options) -> CentralizedEnv:
@@ -147,15 +155,20 @@ def make_gym_env(scenario, **options) -> CentralizedEnv:
     return CentralizedEnv(DObsParallelEnv(scenario=scenario, **options))
 
 
+def reject_horizon_options(kwargs: dict) -> None:
+    """``TypeError`` for ``max_cycles``/``horizon`` (the registered ids take ``max_episode_steps``)."""
+    for k in ("max_cycles", "horizon"):
+        if k in kwargs:
+            raise TypeError(
+                f"{k!r} is not an option of the registered Gymnasium environments: the episode length is "
+                f"gym.make(..., max_episode_steps=N) (a TimeLimit wrapper, in control steps)"
+            )
+
+
 def _gym_entry(entry: EnvEntry):
     """The Gymnasium entry point ``make_<name>`` of a registry entry (no own truncation: ``TimeLimit`` only)."""
     def make(**kwargs):
-        for k in ("max_cycles", "horizon"):
-            if k in kwargs:
-                raise TypeError(
-                    f"{k!r} is not an option of the registered Gymnasium environments: the episode length is "
-                    f"gym.make(..., max_episode_steps=N) (a TimeLimit wrapper, in control steps)"
-                )
+        reject_horizon_options(kwargs)
         return CentralizedEnv(entry.load_class()(horizon=math.inf, **kwargs))
 
     make.__name__ = make.__qualname__ = f"make_{entry.name}"

@@ -96,12 +96,12 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
 
     ## Arguments
 
-    ``disturbance_rejection_v0.parallel_env(disturbance="exosystem", disturbance_amplitude=2.0,
-    dt=1e-3, substeps=50, max_cycles=None, horizon=None, observation="local",
-    obs_dtype="float32", Q=None, R=None, action_bound=None, init_noise=None,
-    state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1,
-    render_mode=None, scenario=None)`` (see ``tracking_v0``
-    for the shared ones). ``scenario=`` accepts any Scenario with an unknown
+    ``disturbance_rejection_v0.parallel_env(scenario=None, dt=1e-3, substeps=50,
+    max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
+    R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
+    reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
+    disturbance_amplitude=2.0)`` (:class:`~dobs_envs.envs.options.EnvOptions`; see
+    ``tracking_v0`` for the shared ones). ``scenario=`` accepts any Scenario with an unknown
     input ``B_v``.
 
     ## Version History
@@ -111,16 +111,19 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
 
     metadata = {"render_modes": ["rgb_array"], "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}
 
-    def _default_scenario(self, opts):
+    @classmethod
+    def _default_scenario(cls, opts):
         from ..scenarios.paper import ne3
 
         return ne3()
 
-    def _check_scenario(self, sc, opts):
+    @classmethod
+    def _check_scenario(cls, sc, opts, given):
         if sc.B_v.shape[1] == 0:
             raise ValueError(f"disturbance_rejection_v0 needs a scenario with an unknown input (Scenario.B_v); {sc.name!r} has none")
 
-    def _default_action_bound(self, sc):
-        if self.options["scenario"] is None:
+    @classmethod
+    def _default_action_bound(cls, sc, opts, given):
+        if opts.scenario is None:
             return np.array(NE3_ACTION_BOUND)
-        return super()._default_action_bound(sc)
+        return super()._default_action_bound(sc, opts, given)

@@ -1,13 +1,12 @@
 """``hetero_mas_v0``: rendezvous of NE1's heterogeneous agents through distributed observers."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .base import DObsParallelEnv
+from .options import HeteroMASOptions
 
-__all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND"]
+__all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND", "Disagreement"]
 
 #: Per-agent input bounds of hetero_mas_v0: 1.5 x the largest |u_i| of the reference
 #: (rendezvous LQR on the own estimate) policy over 20 seeded episodes of the default
@@ -88,10 +87,13 @@ class HeteroMASEnv(DObsParallelEnv):
 
     ## Arguments
 
-    ``hetero_mas_v0.parallel_env(q_rest=0.1, r=1.0, rho=1e-3, dt=1e-3, substeps=50,
-    max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
-    R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1, render_mode=None,
-    scenario=None)``; ``q_rest``, ``r``, ``rho`` parametrise the task
+    ``hetero_mas_v0.parallel_env(scenario=None, dt=1e-3, substeps=50, max_cycles=None,
+    horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
+    action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
+    reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
+    disturbance_amplitude=2.0, q_rest=0.1, r=1.0, rho=1e-3)``
+    (:class:`~dobs_envs.envs.options.HeteroMASOptions`; the disturbance options do not
+    apply: NE1 has no unknown input); ``q_rest``, ``r``, ``rho`` parametrise the task
     (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
     takes any multi-agent Scenario (``mas_agents``).
 
@@ -101,36 +103,43 @@ class HeteroMASEnv(DObsParallelEnv):
     """
 
     metadata = {"render_modes": ["rgb_array"], "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
-    EXTRA_OPTIONS = {"q_rest": 0.1, "r": 1.0, "rho": 1e-3}
+    Options = HeteroMASOptions
     TASK_ERROR_LABEL = r"$\|p - \bar p\,1\|$"
+    _TASK_KEYS = ("q_rest", "r", "rho")
 
-    def _default_scenario(self, opts):
+    @classmethod
+    def _default_scenario(cls, opts):
         from ..scenarios.mas_tasks import rendezvous_scenario
 
-        return rendezvous_scenario(q_rest=opts["q_rest"], r=opts["r"], rho=opts["rho"])
+        return rendezvous_scenario(q_rest=opts.q_rest, r=opts.r, rho=opts.rho)
 
-    def _check_scenario(self, sc, opts):
+    @classmethod
+    def _check_scenario(cls, sc, opts, given):
         if sc.mas_agents is None:
             raise ValueError(f"hetero_mas_v0 needs a multi-agent scenario (Scenario.mas_agents); {sc.name!r} is not one")
-        if opts["scenario"] is not None and any(k in self._given for k in ("q_rest", "r", "rho")):
+        if opts.scenario is not None and any(k in given for k in cls._TASK_KEYS):
             raise ValueError("q_rest, r and rho parametrise the default rendezvous scenario; they cannot be combined with scenario=")
+
+    @classmethod
+    def _default_action_bound(cls, sc, opts, given):
+        if opts.scenario is None and all(k not in given for k in cls._TASK_KEYS):
+            return np.array(NE1_ACTION_BOUND)
+        return super()._default_action_bound(sc, opts, given)
+
+    @classmethod
+    def _task_error(cls, sc, opts):
         from ..scenarios.mas_tasks import position_indices
 
-        self._pos = np.asarray(sc.metadata.get("positions", position_indices(sc)), dtype=np.intp)
+        return Disagreement(sc.metadata.get("positions", position_indices(sc))), "disagreement"
 
-    def __init__(self, **kwargs):
-        self._given = set(kwargs)
-        super().__init__(**kwargs)
 
-    def _default_action_bound(self, sc):
-        if self.options["scenario"] is None and all(k not in self._given for k in ("q_rest", "r", "rho")):
-            return np.array(NE1_ACTION_BOUND)
-        return super()._default_action_bound(sc)
+class Disagreement:
+    """Rendezvous error ``||p - pbar 1||`` of the positions ``p = x[:, positions]``, per copy ``(B,)``."""
 
-    def task_error(self) -> float:
-        p = self._sim.x[0, self._pos]
-        d = p - p.mean()
-        return math.sqrt(float(d @ d))
+    def __init__(self, positions):
+        self.positions = np.asarray(positions, dtype=np.intp)
 
-    def _shared_info(self) -> dict:
-        return {"disagreement": self.task_error()}
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        p = x[:, self.positions]
+        d = p - p.mean(axis=1, keepdims=True)
+        return np.sqrt(np.einsum("bk,bk->b", d, d))

@@ -6,11 +6,16 @@ holding everything any agent may observe::
     f = [ y (sum_i p_i) | xhat_0..xhat_{N-1} (N n) | x (n) | x_r (n) | gamma (N) | gamma_s (N)
           | v (m_v) | r (m) | t (1) | e (n) | 0 (1) | 1 (1) ]
 
-(written by one compiled call, :func:`write_features`; readable numpy reference in
-:mod:`dobs_envs.envs.numpy_features`) and the observation of agent ``k`` is ``f[index_k]`` (one fancy-indexing
-gather, which also copies). Padding entries point at the constant 0, mask
-entries at the constant 1 (or 0 for padding). This keeps the per-step cost at
-one gather per agent whatever components are selected.
+(written for every copy of a batch by one compiled call,
+:func:`dobs_envs.envs.features.write_features`; readable numpy reference in
+:mod:`dobs_envs.envs.numpy_features`) and the observation of agent ``k`` is
+``f[index_k]``. The batched environment core stores all agents' observations in one
+array ``(B, K, D)`` with ``D = max_k len(index_k)``: row ``k`` holds agent ``k``'s
+``len(index_k)`` entries followed by zeros (:attr:`FeatureLayout.padded_index` points
+the padding at the constant 0 of ``f``); ``FeatureLayout.widths[k]`` is agent ``k``'s
+true width. Neighbour-padding entries point at the constant 0, mask entries at the
+constant 1 (or 0 for padding). This keeps the per-step cost at one gather per copy
+whatever components are selected.
 
 Components an agent ``k`` (linked observer node ``i = links[k]``) can observe:
 
@@ -41,8 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components", "write_features", "clip_inplace",
-           "pack_static", "unpack_static", "write_features_packed"]
+__all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components"]
 
 COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
 LOCAL = ("y", "xhat", "neighbors", "mask", "r")
@@ -148,6 +152,42 @@ class FeatureLayout:
             self.agent_index.append(np.concatenate(parts) if parts else np.zeros(0, dtype=np.intp))
             self.agent_layout.append(layout)
         self.all_index = np.concatenate(self.agent_index)
+        #: true observation width of every agent (K,) and the padded width D
+        self.widths = np.array([ix.size for ix in self.agent_index], dtype=np.intp)
+        self.obs_dim = int(self.widths.max()) if len(self.widths) else 0
+        #: (K, D) gather of the padded per-agent observations (padding -> the constant 0)
+        self.padded_index = np.full((len(self.agent_index), self.obs_dim), self.zero, dtype=np.intp)
+        for k, ix in enumerate(self.agent_index):
+            self.padded_index[k, :ix.size] = ix
+        #: positions of the true entries in the flattened (K * D) padded observations, agent-major:
+        #: ``padded.reshape(-1)[concat_index]`` is the agents' observations concatenated
+        self.concat_index = np.concatenate([k * self.obs_dim + np.arange(w) for k, w in enumerate(self.widths)]) \
+            .astype(np.intp) if len(self.widths) else np.zeros(0, dtype=np.intp)
+
+    def state_index(self, has_reference: bool):
+        """Gather of the global state ``(x, x_r if tracking, xhat_0..xhat_{N-1}, v)`` from ``f`` and its
+        ``{component: slice}`` layout."""
+        n, N = self.n, self.N
+        parts, lay, pos = [np.arange(self.x.start, self.x.stop)], {"x": slice(0, n)}, n
+        if has_reference:
+            parts.append(np.arange(self.x_r.start, self.x_r.stop))
+            lay["x_r"] = slice(pos, pos + n)
+            pos += n
+        parts.append(np.arange(self.xhat.start, self.xhat.stop))
+        lay["estimates"] = slice(pos, pos + N * n)
+        pos += N * n
+        if self.m_v:
+            parts.append(np.arange(self.v.start, self.v.stop))
+            lay["v"] = slice(pos, pos + self.m_v)
+            pos += self.m_v
+        return np.concatenate(parts).astype(np.intp), lay
+
+    def offsets(self, p_i) -> np.ndarray:
+        """Start offsets ``(y, xhat, x, x_r, gamma, gamma_s, v, r, time, e)`` followed by the
+        output sizes ``p_i`` (the ``off`` argument of the feature kernel)."""
+        return np.array([self.y.start, self.xhat.start, self.x.start, self.x_r.start, self.gamma.start,
+                         self.gamma_s.start, self.v.start, self.r.start, self.time.start, self.e.start]
+                        + list(p_i), dtype=np.int64)
 
     def bounds(self, k: int, dtype):
         """``(low, high)`` of agent ``k``'s observation (mask entries in [0, 1], the rest unbounded)."""
@@ -161,152 +201,3 @@ class FeatureLayout:
         if "time" in lay:
             low[lay["time"]] = 0.0
         return low, high
-
-
-try:
-    import numba as _numba
-
-    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)  # no fast-math: the finiteness test must see NaN/inf
-except ImportError:  # pragma: no cover
-    def _njit(f):
-        return f
-
-
-@_njit
-def write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, f, off, est, Q, R, u, idx, out):
-    """Fill the feature vector ``f`` from the (batch-1) simulation arrays in one call.
-
-    ``off`` = (y, xhat, x, x_r, gamma, gamma_s, v, r, time, e) start offsets;
-    ``C (N, p, n)``/``G (N, n, p)`` padded design arrays (``y`` keeps the first
-    ``p_i`` rows of node ``i``: ``off[10:10+N]`` holds ``p_i``); ``ref (3, m)`` =
-    amplitude, frequency, phase of ``r(t)``. Writes ``est[i] = ||xhat_i - x||``.
-    Then gathers ``out[j] = f[idx[j]]`` (all agents' observations, concatenated; ``out`` is
-    a fresh array of the observation dtype).
-    Returns ``(e'Qe + u'Ru, ||e||, ||x||, finite)`` with ``e = x - x_r`` (``has_ref``) or ``x``
-    and ``finite`` True iff every entry of ``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s`` and ``v``
-    is finite (accumulated as ``sum(value * 0)``, which is 0 exactly when all are finite).
-    Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``, ``xhat_i = z_i + G_i y_i``.
-    """
-    N, n = z.shape[1], z.shape[2]
-    p = C.shape[1]
-    y = np.empty(p)
-    nonfin = 0.0  # stays 0.0 iff all state entries are finite (inf * 0 and NaN * 0 are NaN)
-    oy = off[0]
-    oxh = off[1]
-    for i in range(N):
-        for q in range(p):
-            s = 0.0
-            for l in range(n):
-                s += C[i, q, l] * x[0, l]
-            y[q] = s
-        pi = off[10 + i]
-        for q in range(pi):
-            f[oy + q] = y[q]
-        oy += pi
-        ss = 0.0
-        for k in range(n):
-            s = 0.0
-            for q in range(p):
-                s += G[i, k, q] * y[q]
-            zk = z[0, i, k]
-            nonfin += zk * 0.0
-            xh = zk + s
-            f[oxh + i * n + k] = xh
-            d = xh - x[0, k]
-            ss += d * d
-        est[i] = np.sqrt(ss)
-    xx = 0.0
-    ee = 0.0
-    for k in range(n):
-        f[off[2] + k] = x[0, k]
-        f[off[3] + k] = x_r[0, k]
-        xx += x[0, k] * x[0, k]
-        nonfin += x[0, k] * 0.0 + x_r[0, k] * 0.0
-        e = x[0, k] - x_r[0, k] if has_ref else x[0, k]
-        f[off[9] + k] = e
-        ee += e * e
-    for i in range(N):
-        f[off[4] + i] = gamma[0, i]
-        f[off[5] + i] = gamma_s[0, i]
-        nonfin += gamma[0, i] * 0.0 + gamma_s[0, i] * 0.0
-    for j in range(v.shape[1]):
-        f[off[6] + j] = v[0, j]
-        nonfin += v[0, j] * 0.0
-    m = ref.shape[1]
-    if has_ref:
-        for j in range(m):
-            f[off[7] + j] = ref[0, j] * np.sin(ref[1, j] * t + ref[2, j])
-    f[off[8]] = t
-    oe = off[9]
-    cost = 0.0
-    for k in range(n):
-        s = 0.0
-        for l in range(n):
-            s += Q[k, l] * f[oe + l]
-        cost += f[oe + k] * s
-    mu = u.shape[0]
-    for k in range(mu):
-        s = 0.0
-        for l in range(mu):
-            s += R[k, l] * u[l]
-        cost += u[k] * s
-    for j in range(idx.shape[0]):
-        out[j] = f[idx[j]]
-    return cost, np.sqrt(ee), np.sqrt(xx), nonfin == 0.0
-
-
-@_njit
-def clip_inplace(u, lo, hi):
-    """Clip ``u`` to ``[lo, hi]`` in place; False (and ``u`` untouched) if ``u`` has NaN/inf."""
-    for j in range(u.shape[0]):
-        if not np.isfinite(u[j]):
-            return False
-    for j in range(u.shape[0]):
-        if u[j] < lo[j]:
-            u[j] = lo[j]
-        elif u[j] > hi[j]:
-            u[j] = hi[j]
-    return True
-
-
-def pack_static(C, G, ref, Q, R, off, idx, F):
-    """Static arrays of :func:`write_features_packed`: one float and one int buffer (fewer
-    arguments = cheaper compiled-call dispatch on the per-step path)."""
-    C, G, ref, Q, R = (np.ascontiguousarray(a, dtype=np.float64) for a in (C, G, ref, Q, R))
-    N, p, n = C.shape
-    m = R.shape[0]
-    SF = np.concatenate([C.ravel(), G.ravel(), ref.ravel(), Q.ravel(), R.ravel()])
-    head = np.array([F, N, p, n, m, ref.shape[1], len(off), len(idx)], dtype=np.int64)
-    SI = np.concatenate([head, np.asarray(off, dtype=np.int64), np.asarray(idx, dtype=np.int64)])
-    return SF, SI
-
-
-@_njit
-def unpack_static(SF, SI):
-    """Views of the static arrays packed by :func:`pack_static`.
-
-    Returns ``(F, C (N, p, n), G (N, n, p), ref (3, m), Q (n, n), R (m, m), off, idx)``
-    with ``F`` the feature-vector length, ``off`` the offsets of
-    :func:`write_features` and ``idx`` the concatenated agent gathers.
-    """
-    F, N, p, n, m, mr, no, ni = SI[0], SI[1], SI[2], SI[3], SI[4], SI[5], SI[6], SI[7]
-    a = 0
-    C = SF[a:a + N * p * n].reshape((N, p, n)); a += N * p * n
-    G = SF[a:a + N * n * p].reshape((N, n, p)); a += N * n * p
-    ref = SF[a:a + 3 * mr].reshape((3, mr)); a += 3 * mr
-    Q = SF[a:a + n * n].reshape((n, n)); a += n * n
-    R = SF[a:a + m * m].reshape((m, m))
-    off = SI[8:8 + no]
-    idx = SI[8 + no:8 + no + ni]
-    return F, C, G, ref, Q, R, off, idx
-
-
-@_njit
-def write_features_packed(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, out):
-    """:func:`write_features` with packed arguments: ``W = [f | est (N) | u (m)]`` (work buffer),
-    ``SF``/``SI`` from :func:`pack_static`. Readable reference:
-    :func:`dobs_envs.envs.numpy_features.write_features_reference` (same signature)."""
-    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
-    N, m = C.shape[0], R.shape[0]
-    return write_features(x, z, x_r, gamma, gamma_s, v, t, C, G, ref, has_ref, W[:F], off, W[F:F + N], Q, R,
-                          W[F + N:F + N + m], idx, out)

@@ -2,11 +2,9 @@
 from __future__ import annotations
 
 from .base import DObsParallelEnv
+from .options import RandomNetworkOptions
 
 __all__ = ["RandomNetworkEnv"]
-
-_PLANT_KEYS = ("n_states", "n_controllers", "n_observers", "unknown_input", "controller")
-_MAS_KEYS = ("n_agents", "controller")
 
 
 class RandomNetworkEnv(DObsParallelEnv):
@@ -86,10 +84,15 @@ class RandomNetworkEnv(DObsParallelEnv):
 
     ## Arguments
 
-    ``random_network_v0.parallel_env(kind="plant", system_seed=0, n_states=6,
-    n_controllers=3, n_observers=4, n_agents=4, graph="random", edge_prob=0.3,
-    unknown_input=False, controller=None, generator_kwargs=None, <common options>)``
-    (common options as ``tracking_v0``; ``scenario=`` is not accepted here).
+    ``random_network_v0.parallel_env(dt=1e-3, substeps=50, max_cycles=None, horizon=None,
+    observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
+    init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic",
+    cost_scale=0.1, render_mode=None, disturbance="exosystem", disturbance_amplitude=2.0,
+    kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
+    graph="random", edge_prob=0.3, unknown_input=False, controller=None,
+    generator_kwargs=None)`` (:class:`~dobs_envs.envs.options.RandomNetworkOptions`;
+    common options as ``tracking_v0``, the disturbance options with ``unknown_input=True``;
+    ``scenario=`` is not accepted here: use ``dobs_envs.envs.make_parallel_env(scenario)``).
 
     ## Version History
 
@@ -97,33 +100,28 @@ class RandomNetworkEnv(DObsParallelEnv):
     """
 
     metadata = {"render_modes": ["rgb_array"], "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
-    EXTRA_OPTIONS = {"kind": "plant", "system_seed": 0, "n_states": 6, "n_controllers": 3, "n_observers": 4,
-                     "n_agents": 4, "graph": "random", "edge_prob": 0.3, "unknown_input": False,
-                     "controller": None, "generator_kwargs": None}
+    Options = RandomNetworkOptions
+    REJECT_OPTIONS = ("scenario",)
 
-    def __init__(self, **kwargs):
-        if "scenario" in kwargs:
-            raise TypeError("random_network_v0 draws its system from the generator; use dobs_envs.envs.make_parallel_env(scenario) for your own")
-        self._given = set(kwargs)
-        super().__init__(**kwargs)
-
-    def _default_scenario(self, opts):
+    @classmethod
+    def _default_scenario(cls, opts):
         from ..scenarios.random import random_mas_scenario, random_plant_scenario
 
-        kind = opts["kind"]
-        gk = dict(opts["generator_kwargs"] or {})
-        common = dict(graph=opts["graph"], edge_prob=opts["edge_prob"], **gk)
-        if opts["controller"] is not None:
-            common["controller"] = opts["controller"]
-        if kind == "plant":
-            bad = [k for k in ("n_agents",) if k in self._given]
-            if bad:
-                raise TypeError(f"{bad} only apply to kind='mas'")
-            return random_plant_scenario(opts["n_states"], opts["n_controllers"], opts["n_observers"],
-                                         seed=opts["system_seed"], unknown_input=opts["unknown_input"], **common)
-        if kind == "mas":
-            bad = [k for k in ("n_states", "n_controllers", "n_observers", "unknown_input") if k in self._given]
-            if bad:
-                raise TypeError(f"{bad} only apply to kind='plant' (kind='mas' takes n_agents)")
-            return random_mas_scenario(opts["n_agents"], seed=opts["system_seed"], **common)
-        raise ValueError(f"kind must be 'plant' or 'mas', got {kind!r}")
+        gk = dict(opts.generator_kwargs or {})
+        common = dict(graph=opts.graph, edge_prob=opts.edge_prob, **gk)
+        if opts.controller is not None:
+            common["controller"] = opts.controller
+        if opts.kind == "plant":
+            return random_plant_scenario(opts.n_states, opts.n_controllers, opts.n_observers,
+                                         seed=opts.system_seed, unknown_input=opts.unknown_input, **common)
+        return random_mas_scenario(opts.n_agents, seed=opts.system_seed, **common)
+
+    @classmethod
+    def make_core(cls, num_envs: int = 1, *, threads: int | None = 1, **kwargs):
+        kind = kwargs.get("kind", "plant")
+        wrong = ("n_agents",) if kind == "plant" else ("n_states", "n_controllers", "n_observers", "unknown_input")
+        bad = [k for k in wrong if k in kwargs]
+        if bad:
+            raise TypeError(f"{bad} only apply to kind='mas'" if kind == "plant"
+                            else f"{bad} only apply to kind='plant' (kind='mas' takes n_agents)")
+        return super().make_core(num_envs, threads=threads, **kwargs)

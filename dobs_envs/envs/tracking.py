@@ -101,15 +101,22 @@ class TrackingEnv(DObsParallelEnv):
 
     ## Arguments
 
-    ``tracking_v0.parallel_env(dt=1e-3, substeps=50, max_cycles=None, horizon=None,
-    observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
-    init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic", cost_scale=0.1, render_mode=None, scenario=None)``.
+    ``tracking_v0.parallel_env(scenario=None, dt=1e-3, substeps=50, max_cycles=None,
+    horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
+    action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
+    reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
+    disturbance_amplitude=2.0)`` (the fields of :class:`~dobs_envs.envs.options.EnvOptions`,
+    which validates them; the same keywords for ``gym.make``/``gym.make_vec`` of
+    ``dobs_envs/Tracking-v0`` except ``max_cycles``/``horizon``, there
+    ``max_episode_steps``).
     ``dt`` is the Euler step of the simulation and ``substeps`` the number of
     Euler steps per control step (inputs held, ZOH): control period
     ``dt * substeps`` = 0.05 s by default; ``substeps=1`` is the paper's
     continuous-time law up to O(dt) (the reference policy then reproduces
     ``dobs_envs.reproduce.simulate(ne2())`` to float round-off).
     ``scenario=`` replaces NE2 by any Scenario with a reference signal.
+    ``disturbance``/``disturbance_amplitude`` apply to systems with an unknown input only
+    (NE2 has none: other values raise ``ValueError``).
     Unknown arguments raise ``TypeError`` listing the valid ones.
 
     ## Version History
@@ -119,16 +126,19 @@ class TrackingEnv(DObsParallelEnv):
 
     metadata = {"render_modes": ["rgb_array"], "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
 
-    def _default_scenario(self, opts):
+    @classmethod
+    def _default_scenario(cls, opts):
         from ..scenarios.paper import ne2
 
         return ne2()
 
-    def _check_scenario(self, sc, opts):
+    @classmethod
+    def _check_scenario(cls, sc, opts, given):
         if sc.reference is None:
             raise ValueError(f"tracking_v0 needs a scenario with a reference signal r (Scenario.reference); {sc.name!r} has none")
 
-    def _default_action_bound(self, sc):
-        if self.options["scenario"] is None:
+    @classmethod
+    def _default_action_bound(cls, sc, opts, given):
+        if opts.scenario is None:
             return np.array(NE2_ACTION_BOUND)
-        return super()._default_action_bound(sc)
+        return super()._default_action_bound(sc, opts, given)

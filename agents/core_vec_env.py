@@ -1,0 +1,185 @@
+"""SB3 ``VecEnv`` over the batched environment core (:class:`dobs_envs.envs.EnvCore`).
+
+One compiled call advances every copy; two slot layouts:
+
+- **centralised** (``shared=False``): slot ``c`` is copy ``c`` seen as the centralised
+  Gymnasium env (the agents' observations concatenated, all inputs stacked);
+- **parameter-shared** (``shared=True``): slot ``c * K + k`` is agent ``k`` of copy ``c``
+  (one policy for every controller node), observations padded to the widest agent plus
+  an optional one-hot agent id, actions truncated to the agent's width and clipped to its
+  bounds -- exactly :class:`agents.vec_env.SlotEncoder`'s encoding (shared with evaluation).
+
+Semantics (those of :class:`agents.vec_env.ParallelVecEnv` and of SB3's ``DummyVecEnv``
+over the Gymnasium env):
+
+- **Autoreset** in the same step: a finished copy's slots report ``done``,
+  ``info["terminal_observation"]`` (that slot's last observation) and the first observation
+  of the copy's next episode.
+- ``info["TimeLimit.truncated"]`` is True only for a truncation (``max_cycles``), never for a
+  termination (then ``info["termination_reason"]`` is set).
+- **Seeding**: :meth:`seed` makes the next :meth:`reset` seed copy ``c`` with ``seed + c``; later
+  autoresets draw from the copy's own generator (reproducible runs).
+- ``rescale_actions``: actions in ``[-1, 1]`` mapped affinely onto each input's bounds (clipped first).
+- Wrap it in ``VecMonitor`` for episode returns/lengths in the infos (``agents.train.build_vec_env`` does).
+"""
+from __future__ import annotations
+
+import warnings
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from dobs_envs.envs import REASONS
+from dobs_envs.envs.centralized import central_spaces
+
+from .vec_env import SlotEncoder
+
+__all__ = ["CoreVecEnv"]
+
+
+class CoreVecEnv(VecEnv):
+    """SB3 VecEnv over ``core`` (see module doc).
+
+    Parameters
+    ----------
+    core : EnvCore with ``B`` copies.
+    shared : one slot per (copy, agent) (parameter sharing) instead of one per copy.
+    agent_id : (shared) append a one-hot agent id to the observations.
+    rescale_actions : actions in ``[-1, 1]`` mapped onto the inputs' bounds.
+    """
+
+    def __init__(self, core, *, shared: bool = False, agent_id: bool = False, rescale_actions: bool = False):
+        self.core = c = core
+        self.shared = bool(shared)
+        self.n_copies = B = c.num_envs
+        self.agents = list(c.agents)
+        self.n_agents = K = c.n_agents if self.shared else 1
+        b = np.asarray(c.action_bound, dtype=np.float64)
+        self._lo, self._hi = -b, b
+        self.rescale_actions = bool(rescale_actions)
+        central_obs, central_act, _ = central_spaces(c)
+        self.env_action_space = central_act  # the inputs' own bounds (evaluation undoes the rescaling with them)
+        if self.shared:
+            bounds = [c.observation_bounds(k) for k in range(c.n_agents)]
+            self.encoder = SlotEncoder(
+                self.agents, {a: spaces.Box(*bd, dtype=c.obs_dtype) for a, bd in zip(self.agents, bounds)},
+                {a: spaces.Box(-b[s].astype(np.float32), b[s].astype(np.float32), dtype=np.float32)
+                 for a, s in zip(self.agents, c.channel_slices)}, agent_id=agent_id, rescale_actions=rescale_actions)
+            obs_space, act_space = self.encoder.observation_space, self.encoder.action_space
+            A = self.encoder.act_dim
+            # input component j <- slot action (agent k_j, component j - start_k) in the (K * A) row of a copy
+            self._gather = np.concatenate([k * A + np.arange(s.stop - s.start)
+                                           for k, s in enumerate(c.channel_slices)]).astype(np.intp)
+            self._onehot = np.tile(np.eye(K, dtype=np.float32), (B, 1)) if agent_id else None
+            self._dtype = np.float32
+        else:
+            self.encoder = None
+            obs_space = central_obs
+            act_space = spaces.Box(-1.0, 1.0, central_act.shape, dtype=np.float32) if rescale_actions else central_act
+            self._cat = c.layout.concat_index
+            self._dtype = c.obs_dtype
+        super().__init__(B * K, obs_space, act_space)
+        self._actions = None
+        self._copy_seeds: list | None = None
+        self._closed = False
+
+    # ------------------------------------------------------------------ encoding
+    def _encode(self) -> np.ndarray:
+        c = self.core
+        if not self.shared:
+            return c.observations.reshape(self.n_copies, -1)[:, self._cat].astype(self._dtype, copy=False)
+        o = c.observations.reshape(self.num_envs, c.obs_dim).astype(np.float32)
+        return o if self._onehot is None else np.concatenate([o, self._onehot], axis=1)
+
+    def _decode(self, actions) -> np.ndarray:
+        a = np.asarray(actions, dtype=np.float64).reshape(self.n_copies, -1)
+        if self.shared:
+            a = a[:, self._gather]
+        if self.rescale_actions:
+            a = self._lo + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (self._hi - self._lo)
+        if self.shared:  # as SlotEncoder.decode: clipped to the agent's box, in its float32 dtype
+            a = np.clip(a, self._lo, self._hi).astype(np.float32).astype(np.float64)
+        return a
+
+    def slot_info(self, slot: int) -> tuple[int, str]:
+        """``slot -> (copy index, agent name)`` (centralised: agent ``"all"``)."""
+        c, k = divmod(int(slot), self.n_agents)
+        return c, self.agents[k] if self.shared else "all"
+
+    # ------------------------------------------------------------------ core API
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        self._copy_seeds = [int(seed) + c for c in range(self.n_copies)]
+        return [s for s in self._copy_seeds for _ in range(self.n_agents)]
+
+    def reset(self) -> np.ndarray:
+        opts = self._options[0] if self._options and self._options[0] else None
+        self.core.reset(None, self._copy_seeds, opts)
+        self._copy_seeds = None
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return self._encode()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        u = self._decode(self._actions)
+        self._actions = None
+        res = self.core.advance(u)
+        K = self.n_agents
+        term, trunc = res.terminated, res.truncated
+        done_c = term | trunc
+        rew = res.reward.astype(np.float32)
+        obs = self._encode()
+        infos = [{"TimeLimit.truncated": False} for _ in range(self.num_envs)]
+        if done_c.any():
+            rows = np.flatnonzero(done_c)
+            for c in rows:
+                reason = REASONS[int(res.reason[c])]
+                for s in range(c * K, c * K + K):
+                    info = infos[s]
+                    info["terminal_observation"] = obs[s].copy()
+                    info["TimeLimit.truncated"] = bool(trunc[c] and not term[c])
+                    if term[c]:
+                        info["termination_reason"] = reason
+            dones = np.repeat(done_c, K)  # copied before the reset overwrites the core's buffers
+            self.core.reset(rows)
+            obs = self._encode()
+        else:
+            dones = np.zeros(self.num_envs, dtype=bool)
+        return obs, np.repeat(rew, K), dones, infos
+
+    def close(self) -> None:
+        self._closed = True
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    # ------------------------------------------------------------------ attributes (shared by all slots)
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        n = len(self._get_indices(indices))
+        if attr_name == "render_mode":
+            return [None] * n
+        return [getattr(self.core, attr_name)] * n
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self.core, attr_name, value)  # one core: the attribute is shared by every slot
+
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        out = getattr(self.core, method_name)(*method_args, **method_kwargs)
+        return [out] * len(self._get_indices(indices))
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        warnings.warn("CoreVecEnv does not render; use a single environment with render_mode='rgb_array'")
+        return [None] * self.num_envs

@@ -1,0 +1,236 @@
+"""The options of the environments: one frozen, validated dataclass per environment class.
+
+:class:`EnvOptions` is the single list of the options every environment accepts, with
+their defaults; environments with task parameters extend it (:class:`HeteroMASOptions`,
+:class:`RandomNetworkOptions`). The dataclass fields *are* the keyword arguments of
+the environment classes, of ``tracking_v0.parallel_env(...)``, of ``gym.make`` /
+``gym.make_vec`` and of the batched core (the class docstrings' ``## Arguments``
+lists are tested against them). Building an options object validates every option
+that does not depend on the system (types, ranges, names); the environment core
+checks the rest (matrix shapes against the scenario, ``disturbance`` against ``B_v``).
+
+An unknown keyword raises ``TypeError`` worded as Python's own, followed by the valid
+names: ``TrackingEnv.__init__() got an unexpected keyword argument 'substep'; valid
+arguments are: [...]``.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import MISSING, dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+__all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
+
+#: reward shapes of the ``reward`` option
+REWARDS = ("quadratic", "log", "sqrt")
+#: unknown-input signals of the ``disturbance`` option
+DISTURBANCES = ("exosystem", "random", "none")
+#: render modes of every environment
+RENDER_MODES = ("rgb_array",)
+
+_NUM = (int, float, np.integer, np.floating)
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, _NUM) and not isinstance(v, bool)
+
+
+@dataclass(frozen=True, eq=False)
+class EnvOptions:
+    """Options of every environment (defaults; ``None``: "see the environment docstring").
+
+    Attributes
+    ----------
+    scenario : Scenario, str or path, optional
+        The system (a :class:`~dobs_envs.scenarios.base.Scenario` or a YAML/JSON file);
+        ``None``: the environment's default.
+    dt : float
+        Euler step (s) of the simulation.
+    substeps : int
+        Euler steps per control step (inputs held, ZOH); control period ``dt * substeps``.
+    max_cycles : int, optional
+        Truncation after this many control steps; excludes ``horizon``.
+    horizon : float, optional
+        Truncation horizon in seconds (``math.inf``: never truncate); ``None`` with
+        ``max_cycles=None``: the scenario's ``t_end``.
+    observation : str or sequence of str
+        ``"local"``, ``"full"`` or component names (:mod:`dobs_envs.envs.observation`).
+    obs_dtype : str
+        ``"float32"`` or ``"float64"``.
+    Q, R : array_like, optional
+        Cost weights (``None``: the scenario's).
+    action_bound : float, array_like (m,) or "auto", optional
+        Per input component (``None``: the environment's default).
+    init_noise : float, optional
+        Half-width of the uniform noise added to ``x0`` at reset (``None``: the
+        scenario's ``x0_scale`` distribution if it has one, else 1.0).
+    state_bound : float
+        Termination when ``||x|| > state_bound`` (at most 1e150).
+    termination_penalty : bool
+        Charge the cost of the bound for the rest of the horizon on termination.
+    reward : str
+        ``"quadratic"`` (``c``), ``"log"`` (``log(1 + c / c0)``) or ``"sqrt"`` (``sqrt(c)``).
+    cost_scale : float
+        Error norm ``c0 = lambda_max(Q) cost_scale^2`` of the log reward.
+    render_mode : str, optional
+        ``None`` or ``"rgb_array"``.
+    disturbance : str
+        ``"exosystem"``, ``"random"`` or ``"none"`` (systems with an unknown input only).
+    disturbance_amplitude : float
+        Bound of the ``"random"`` disturbance.
+    """
+
+    scenario: Any = None
+    dt: float = 1e-3
+    substeps: int = 50
+    max_cycles: int | None = None
+    horizon: float | None = None
+    observation: Any = "local"
+    obs_dtype: str = "float32"
+    Q: Any = None
+    R: Any = None
+    action_bound: Any = None
+    init_noise: float | None = None
+    state_bound: float = 1e3
+    termination_penalty: bool = True
+    reward: str = "quadratic"
+    cost_scale: float = 0.1
+    render_mode: str | None = None
+    disturbance: str = "exosystem"
+    disturbance_amplitude: float = 2.0
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def names(cls) -> tuple:
+        """Option names, in declaration order."""
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def defaults(cls) -> dict:
+        """``{name: default}`` of every option."""
+        return {f.name: (f.default if f.default is not MISSING else f.default_factory()) for f in fields(cls)}
+
+    @classmethod
+    def from_kwargs(cls, owner: str, kwargs: dict, *, reject: tuple = ()) -> "EnvOptions":
+        """The options of ``owner`` (a class name, for the error message) from keyword arguments.
+
+        Raises ``TypeError`` worded as Python's for the first unknown (or ``reject``-ed) name,
+        followed by the valid names, and ``ValueError`` naming the first invalid option.
+        """
+        valid = [n for n in cls.names() if n not in reject]
+        for k in kwargs:
+            if k not in valid:
+                raise TypeError(f"{owner}.__init__() got an unexpected keyword argument {k!r}; "
+                                f"valid arguments are: {sorted(valid)}")
+        return cls(**kwargs)
+
+    def replace(self, **changes) -> "EnvOptions":
+        """A validated copy with ``changes``."""
+        return replace(self, **changes)
+
+    def __post_init__(self):
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        if isinstance(self.scenario, os.PathLike):
+            set_("scenario", os.fspath(self.scenario))
+        dt, sub = self.dt, self.substeps
+        if not (_is_num(dt) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+        if isinstance(sub, bool) or not isinstance(sub, (int, np.integer)) or sub < 1:
+            raise ValueError(f"substeps must be a positive integer, got {sub!r}")
+        set_("dt", float(dt))
+        set_("substeps", int(sub))
+        mc, hz = self.max_cycles, self.horizon
+        if mc is not None and hz is not None:
+            raise ValueError("give either max_cycles (control steps) or horizon (seconds), not both")
+        if mc is not None:
+            if isinstance(mc, bool) or not isinstance(mc, (int, np.integer)) or mc < 1:
+                raise ValueError(f"max_cycles must be a positive integer, got {mc!r}")
+            set_("max_cycles", int(mc))
+        if hz is not None and not (_is_num(hz) and hz > 0):
+            raise ValueError(f"horizon must be a positive number of seconds (math.inf: never truncate), got {hz!r}")
+        try:
+            dtype = np.dtype(self.obs_dtype)
+        except TypeError:
+            dtype = None
+        if dtype not in (np.float32, np.float64):
+            raise ValueError(f"obs_dtype must be 'float32' or 'float64', got {self.obs_dtype!r}")
+        set_("obs_dtype", dtype.name)
+        if not isinstance(self.observation, str):
+            try:
+                set_("observation", tuple(self.observation))
+            except TypeError:
+                raise ValueError(f"observation must be 'local', 'full' or a sequence of component names, "
+                                 f"got {self.observation!r}") from None
+        ab = self.action_bound
+        if isinstance(ab, str):
+            if ab != "auto":
+                raise ValueError(f"action_bound must be a number, an array (one per input component) or 'auto', "
+                                 f"got {ab!r}")
+        elif ab is not None:
+            arr = np.array(ab, dtype=np.float64) if not isinstance(ab, bool) else np.array(np.nan)
+            if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+                raise ValueError(f"action_bound must be a positive finite scalar or one per input component, "
+                                 f"got {ab!r}")
+            arr.flags.writeable = False
+            set_("action_bound", float(arr) if arr.ndim == 0 else arr)
+        noise = self.init_noise
+        if noise is not None:
+            if not (_is_num(noise) and math.isfinite(noise) and noise >= 0):
+                raise ValueError(f"init_noise must be None or a finite number >= 0, got {noise!r}")
+            set_("init_noise", float(noise))
+        sb = self.state_bound
+        if not (_is_num(sb) and math.isfinite(sb) and 0 < sb <= 1e150):
+            raise ValueError(f"state_bound must be a positive number <= 1e150 (its square enters the termination "
+                             f"penalty), got {sb!r}")
+        set_("state_bound", float(sb))
+        set_("termination_penalty", bool(self.termination_penalty))
+        if self.reward not in REWARDS:
+            raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
+        cs = self.cost_scale
+        if not (_is_num(cs) and math.isfinite(cs) and cs > 0):
+            raise ValueError(f"cost_scale must be a positive finite number (an error norm), got {cs!r}")
+        set_("cost_scale", float(cs))
+        if self.render_mode is not None and self.render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode must be None or one of {list(RENDER_MODES)}, got {self.render_mode!r}")
+        if self.disturbance not in DISTURBANCES:
+            raise ValueError(f"disturbance must be one of {DISTURBANCES}, got {self.disturbance!r}")
+        amp = self.disturbance_amplitude
+        if not (_is_num(amp) and math.isfinite(amp) and amp >= 0):
+            raise ValueError(f"disturbance_amplitude must be finite and >= 0, got {amp!r}")
+        set_("disturbance_amplitude", float(amp))
+
+
+@dataclass(frozen=True, eq=False)
+class HeteroMASOptions(EnvOptions):
+    """:class:`EnvOptions` plus the rendezvous task parameters of ``hetero_mas_v0``
+    (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`)."""
+
+    q_rest: float = 0.1
+    r: float = 1.0
+    rho: float = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class RandomNetworkOptions(EnvOptions):
+    """:class:`EnvOptions` plus the generator options of ``random_network_v0``
+    (:mod:`dobs_envs.scenarios.random`); ``scenario`` is not accepted by that environment."""
+
+    kind: str = "plant"
+    system_seed: int = 0
+    n_states: int = 6
+    n_controllers: int = 3
+    n_observers: int = 4
+    n_agents: int = 4
+    graph: str = "random"
+    edge_prob: float = 0.3
+    unknown_input: bool = False
+    controller: str | None = None
+    generator_kwargs: dict | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.kind not in ("plant", "mas"):
+            raise ValueError(f"kind must be 'plant' or 'mas', got {self.kind!r}")

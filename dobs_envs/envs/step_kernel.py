@@ -1,0 +1,243 @@
+"""One environment step of every copy of a batch in one compiled call.
+
+:func:`advance_batch` does, for every copy ``b`` (:func:`advance_range` for a range of copies,
+which threads may run concurrently on disjoint ranges: it releases the GIL):
+
+1. clip the input ``u[b]`` to ``[u_lo, u_hi]`` into the copy's work row (the applied input);
+2. with the "random" disturbance, set ``v[b] = sum_l a sin(w t + phi)`` at the period's start (held);
+3. simulate one control period (:func:`dobs_envs.sim.kernel.advance_rows`: SIMD tiles across
+   copies) with the held input and the held reference command ``r^k(t)`` of eq. (refxdy) (the
+   ``r`` block of the copy's feature vector, written at ``t`` by the previous step or reset);
+4. ``t += T``, ``cycles += 1``; features, observations and the stage cost
+   (:func:`dobs_envs.envs.features.features_row`);
+5. reward ``-c * T`` (quadratic) or ``-log(1 + c / c0) * T`` (log); termination with reason
+   code 2 (non-finite state: the kernel's finiteness flag) or 1 (``||x|| > state_bound``); on
+   termination a non-finite reward becomes ``-bound_step_cost``, the termination penalty
+   ``bound_step_cost * max(0, penalty_cycles - cycles)`` is charged, and the copy's
+   observations and feature vector are cleaned (NaN -> 0, +-inf -> +-largest finite value of
+   their dtype); otherwise truncation (reason 3) when ``cycles >= max_cycles >= 0``.
+
+Nothing is modified when some input is not finite: the kernel returns the first such copy
+(else -1). The readable numpy reference is :func:`dobs_envs.envs.numpy_advance.advance_reference`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..sim.kernel import TILE, advance_rows
+from .features import features_row, unpack_static
+
+try:
+    import numba as _numba
+
+    _njit = _numba.njit(cache=True, fastmath=False, nogil=True)
+except ImportError:  # pragma: no cover
+    def _njit(f):
+        return f
+
+__all__ = ["advance_batch", "advance_range", "first_non_finite", "pack_kernel_args", "unpack_kernel_args",
+           "REASON_NONE", "REASON_STATE_BOUND", "REASON_NON_FINITE", "REASON_HORIZON"]
+
+#: reason codes (int8) of a step
+REASON_NONE, REASON_STATE_BOUND, REASON_NON_FINITE, REASON_HORIZON = 0, 1, 2, 3
+
+
+def pack_kernel_args(ka) -> tuple:
+    """:class:`~dobs_envs.sim.state.KernelArgs` packed into ``(KF float64, KI int64)`` buffers (two
+    arrays to dispatch instead of 55 on the per-step path); :func:`unpack_kernel_args` inverts it."""
+    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
+    n, m, mv = B.shape[0], B.shape[1], B_v.shape[1]
+    N, p, r, D = C.shape[0], C.shape[1], Q_proj.shape[2], nbr_idx.shape[1]
+    dense = [np.ravel(a) for a in (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, nbr_w, deg, A_r,
+                                    phi, phi_s, sigma, sigma_s, Phi_v)] + [[float(dt)]]
+    head = [n, m, mv, N, p, r, D, int(substeps), int(bool(has_reference)), len(rows)]
+    ints = [np.asarray(proj_range, dtype=np.int64), np.ravel(nbr_idx)]
+    fpos = sum(a.size if hasattr(a, "size") else len(a) for a in dense)
+    ipos = len(head) + 5 * len(rows) + N + N * D
+    table = []
+    for ptr, col, val, row, gcol in rows:  # (ptr offset, rows + 1, col offset, nnz, val offset)
+        table += [ipos, ptr.size, ipos + ptr.size, col.size, fpos]
+        ints += [ptr, col, row, gcol]
+        dense.append(val)
+        ipos += ptr.size + 3 * col.size
+        fpos += val.size
+    KF = np.concatenate([np.asarray(a, dtype=np.float64) for a in dense])
+    KI = np.concatenate([np.asarray(head + table, dtype=np.int64)] + [np.asarray(a, dtype=np.int64) for a in ints])
+    return KF, KI
+
+
+@_njit
+def _rows(KF, KI, f):
+    t = 10 + 5 * f
+    po, pn, co, nz, vo = KI[t], KI[t + 1], KI[t + 2], KI[t + 3], KI[t + 4]
+    return KI[po:po + pn], KI[co:co + nz], KF[vo:vo + nz], KI[co + nz:co + 2 * nz], KI[co + 2 * nz:co + 3 * nz]
+
+
+@_njit
+def unpack_kernel_args(KF, KI):
+    """The ``KernelArgs`` tuple (views of ``KF``/``KI``; ``proj_range`` as 0/1 integers)."""
+    n, m, mv, N, p, r, D, substeps, has_ref, nf = KI[0], KI[1], KI[2], KI[3], KI[4], KI[5], KI[6], KI[7], KI[8], KI[9]
+    a = 0
+    A = KF[a:a + n * n].reshape((n, n))
+    a += n * n
+    B = KF[a:a + n * m].reshape((n, m))
+    a += n * m
+    B_v = KF[a:a + n * mv].reshape((n, mv))
+    a += n * mv
+    C = KF[a:a + N * p * n].reshape((N, p, n))
+    a += N * p * n
+    E_bar = KF[a:a + N * n * n].reshape((N, n, n))
+    a += N * n * n
+    F_bar = KF[a:a + N * n * p].reshape((N, n, p))
+    a += N * n * p
+    G_bar = KF[a:a + N * n * p].reshape((N, n, p))
+    a += N * n * p
+    B_bar = KF[a:a + N * n * m].reshape((N, n, m))
+    a += N * n * m
+    Q_proj = KF[a:a + N * n * r].reshape((N, n, r))
+    a += N * n * r
+    nbr_w = KF[a:a + N * D].reshape((N, D))
+    a += N * D
+    deg = KF[a:a + N]
+    a += N
+    A_r = KF[a:a + n * n].reshape((n, n))
+    a += n * n
+    phi = KF[a:a + N]
+    phi_s = KF[a + N:a + 2 * N]
+    sigma = KF[a + 2 * N:a + 3 * N]
+    sigma_s = KF[a + 3 * N:a + 4 * N]
+    a += 4 * N
+    Phi_v = KF[a:a + mv * mv].reshape((mv, mv))
+    a += mv * mv
+    dt = KF[a]
+    o = 10 + 5 * nf
+    proj_range = KI[o:o + N]
+    nbr_idx = KI[o + N:o + N + N * D].reshape((N, D))
+    rows = (_rows(KF, KI, 0), _rows(KF, KI, 1), _rows(KF, KI, 2), _rows(KF, KI, 3), _rows(KF, KI, 4),
+            _rows(KF, KI, 5), _rows(KF, KI, 6), _rows(KF, KI, 7), _rows(KF, KI, 8), _rows(KF, KI, 9),
+            _rows(KF, KI, 10), _rows(KF, KI, 11))
+    return (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+            phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_ref != 0, rows)
+
+
+@_njit
+def first_non_finite(u):
+    """Index of the first copy whose input row has NaN/inf, or -1."""
+    for b in range(u.shape[0]):
+        for j in range(u.shape[1]):
+            if not np.isfinite(u[b, j]):
+                return b
+    return -1
+
+
+@_njit
+def _clean(a, b, big, ncols):
+    """NaN -> 0, +-inf -> +-big in the first ``ncols`` entries of row ``b`` of the 2-D array ``a``."""
+    for j in range(ncols):
+        o = a[b, j]
+        if np.isnan(o):
+            a[b, j] = 0.0
+        elif np.isinf(o):
+            a[b, j] = big if o > 0 else -big
+
+
+@_njit
+def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
+    """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
+    releases the GIL: threads may advance disjoint ranges of one batch concurrently."""
+    ka = unpack_kernel_args(ka[0], ka[1])
+    t, x, z, gamma, gamma_s, v, x_r = state
+    outf, outb, reason, cycles = outs
+    reward, cost, err, xnorm = outf[0], outf[1], outf[2], outf[3]
+    finite, term, trunc = outb[0], outb[1], outb[2]
+    sig_a, sig_w, sig_ph = sig[0], sig[1], sig[2]
+    u_lo, u_hi, period, state_bound, bound_cost, log_c0, big_obs, max_cycles, penalty_cycles, \
+        has_ref, reward_code, penalty, random_v = consts
+    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    N = z.shape[1]
+    m = u.shape[1]
+    ou = F + N
+    o_r = off[7]
+    # 1-2: applied inputs, disturbance at the period's start
+    for b in range(lo, hi):
+        for j in range(m):
+            uj = u[b, j]
+            W[b, ou + j] = u_lo[j] if uj < u_lo[j] else (u_hi[j] if uj > u_hi[j] else uj)
+        if random_v:
+            tb = t[b]
+            for j in range(v.shape[1]):
+                s = 0.0
+                for l in range(sig_a.shape[2]):
+                    s += sig_a[b, j, l] * np.sin(sig_w[b, j, l] * tb + sig_ph[b, j, l])
+                v[b, j] = s
+    # 3: one control period (held input and reference command)
+    advance_rows(x, z, gamma, gamma_s, v, x_r, W[:, ou:ou + m], W[:, o_r:o_r + m], ka, lo, hi)
+    # 4-5: features, reward, termination
+    obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
+    y = np.empty(C.shape[1])
+    f64max = np.finfo(np.float64).max
+    for b in range(lo, hi):
+        t[b] = t[b] + period
+        cycles[b] += 1
+        c, e, xn, fin = features_row(b, x, z, x_r, gamma, gamma_s, v, t, W, F, C, G, ref, Q, R, off, idx, has_ref,
+                                     obs2, y)
+        cost[b] = c
+        err[b] = e
+        xnorm[b] = xn
+        finite[b] = fin
+        if reward_code == 1:  # log
+            shaped = np.log1p(c / log_c0) if c < np.inf else np.inf
+        elif reward_code == 2:  # sqrt
+            shaped = np.sqrt(c)
+        else:
+            shaped = c
+        rw = -shaped * period
+        if not fin:
+            tm, rs = True, REASON_NON_FINITE
+        elif xn > state_bound:
+            tm, rs = True, REASON_STATE_BOUND
+        else:
+            tm, rs = False, REASON_NONE
+        tr = False
+        if tm:
+            _clean(obs2, b, big_obs, obs2.shape[1])
+            _clean(W, b, f64max, F)  # the feature vector; est/u stay raw (diagnostics)
+            if not np.isfinite(rw):
+                rw = -bound_cost
+            if penalty:
+                rw -= bound_cost * max(0, penalty_cycles - cycles[b])
+        elif max_cycles >= 0 and cycles[b] >= max_cycles:
+            tr, rs = True, REASON_HORIZON
+        reward[b] = rw
+        term[b] = tm
+        trunc[b] = tr
+        reason[b] = rs
+
+
+@_njit
+def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
+    """One step of every copy (see module docstring), serial.
+
+    Parameters
+    ----------
+    state : (t (B,), x (B, n), z (B, N, n), gamma (B, N), gamma_s (B, N), v (B, m_v), x_r (B, n)),
+        updated in place.
+    W : (B, F + N + m) work rows ``[f | est | u]``; obs : (B, K, D) padded observations.
+    outs : (outf (4, B) float64 rows reward, cost, ||e||, ||x||; outb (3, B) bool rows finite,
+        terminated, truncated; reason (B,) int8; cycles (B,) int64), written.
+    u : (B, m) float64 requested inputs (read).
+    sig : (3, B, m_v, L): amplitudes, frequencies, phases of the "random" disturbance.
+    ka : (KF, KI) of :func:`pack_kernel_args`; SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
+    consts : (u_lo (m,), u_hi (m,), period, state_bound, bound_step_cost, log_c0, big_obs,
+        max_cycles (-1: none), penalty_cycles, has_ref, reward_code (0 quadratic, 1 log, 2 sqrt), termination_penalty, random_v).
+
+    Returns
+    -------
+    int : -1, or the first copy whose input is not finite (then nothing was modified).
+    """
+    bad = first_non_finite(u)
+    if bad >= 0:
+        return bad
+    advance_range(0, u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts)
+    return -1

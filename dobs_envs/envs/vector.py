@@ -1,0 +1,150 @@
+"""Native Gymnasium ``VectorEnv`` of the centralised environments (a thin adapter over the core).
+
+``gym.make_vec("dobs_envs/Tracking-v0", num_envs=1024)`` (``vectorization_mode``
+``"vector_entry_point"``, the default for these ids) builds a :class:`DObsVectorEnv`:
+``num_envs`` copies in one :class:`~dobs_envs.envs.core.EnvCore`, advanced by one
+compiled call per step. Copy ``c`` is the centralised env of the same id
+(:class:`~dobs_envs.envs.centralized.CentralizedEnv`): same spaces, same
+observations, rewards and episodes for the same seed (tested bit for bit).
+
+- **Episode length**: ``max_episode_steps`` (from the registry, or given to ``make_vec``)
+  control steps, then ``truncated``; ``max_cycles``/``horizon`` are not options here. As
+  under ``gym.make``'s ``TimeLimit``, the termination penalty charges the scenario's ``t_end``.
+- **Autoreset**: ``metadata["autoreset_mode"] = AutoresetMode.NEXT_STEP``. The step that ends
+  a copy's episode returns its terminal observation; the next ``step`` resets that copy
+  (its action is ignored) and returns the first observation of the new episode with reward
+  0 and ``terminated = truncated = False``.
+- **Seeding**: ``reset(seed=s)`` seeds copy ``c`` with ``s + c`` (a list seeds each copy);
+  autoresets draw from the copy's own generator, so seeded runs are reproducible.
+  ``reset(options={"reset_mask": mask})`` resets only the masked copies.
+- **Infos** (arrays over the copies, each with its ``"_<key>"`` mask): ``tracking_error (B,)``,
+  ``estimation_errors (B, N)``, ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g.
+  ``disagreement``), and ``termination_reason (B,)`` int8 codes of
+  :data:`~dobs_envs.envs.core.REASONS` (mask: the copies that ended).
+- ``threads`` (default: one per CPU core) advance disjoint ranges of at least 128 copies
+  concurrently (the compiled step releases the GIL; same results for any number of threads).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from gymnasium.vector import VectorEnv
+from gymnasium.vector.utils import batch_space
+from gymnasium.vector.vector_env import AutoresetMode
+
+from ..registry import ENVIRONMENTS, EnvEntry
+from .centralized import reject_horizon_options, central_spaces
+
+__all__ = ["DObsVectorEnv"] + [f"make_vec_{name}" for name in ENVIRONMENTS]
+
+
+class DObsVectorEnv(VectorEnv):
+    """``num_envs`` copies of a dobs_envs environment class as one Gymnasium ``VectorEnv`` (see module doc).
+
+    Parameters
+    ----------
+    env_class : a :class:`~dobs_envs.envs.base.DObsParallelEnv` subclass (its options and hooks)
+    num_envs : int
+    max_episode_steps : truncation horizon in control steps (None: the class default, ``t_end``)
+    threads : threads advancing disjoint ranges of copies (None: one per CPU core; 1: serial)
+    **kwargs : the options of ``env_class``
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(self, env_class, num_envs: int = 1, *, max_episode_steps: int | None = None, threads: int | None = None,
+                 **kwargs):
+        reject_horizon_options(kwargs)
+        # as gym.make's TimeLimit over a never-truncating env: the termination penalty charges the
+        # scenario's t_end, the episode is cut after max_episode_steps (default: t_end too)
+        self.core = c = env_class.make_core(num_envs, threads=threads, horizon=math.inf, **kwargs)
+        c.max_cycles = c.penalty_cycles if max_episode_steps is None else max_episode_steps
+        self.num_envs = c.num_envs
+        self.metadata = {**self.metadata, "name": env_class.metadata["name"]}
+        self.render_mode = c.options.render_mode
+        self.single_observation_space, self.single_action_space, self.agent_observation_slices = central_spaces(c)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._cat = c.layout.concat_index
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
+        B = self.num_envs
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        rows = np.arange(B) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
+        if seed is None:
+            seeds = None
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + int(r) for r in rows]
+        else:
+            seeds = list(seed)
+            if len(seeds) != B:
+                raise ValueError(f"seed must be None, an int or one seed per copy ({B}), got {len(seeds)}")
+            seeds = [seeds[r] for r in rows]
+        self.core.reset(rows, seeds, options)
+        self._autoreset[rows] = False
+        return self._obs(), self._infos(None)
+
+    def step(self, actions):
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"actions must have shape {self.action_space.shape} (copies, inputs), got {a.shape}")
+        again = self._autoreset
+        if again.any():
+            a = a.copy()
+            a[again] = 0.0  # ignored: those copies start a new episode instead
+        res = self.core.advance(a)
+        rew, term, trunc, reason = res.reward.copy(), res.terminated.copy(), res.truncated.copy(), res.reason.copy()
+        if again.any():
+            rows = np.flatnonzero(again)
+            self.core.reset(rows)
+            rew[rows], term[rows], trunc[rows], reason[rows] = 0.0, False, False, 0
+        self._autoreset = term | trunc
+        return self._obs(), rew, term, trunc, self._infos(reason)
+
+    def _obs(self) -> np.ndarray:
+        return self.core.observations.reshape(self.num_envs, -1)[:, self._cat]  # a new array
+
+    def _infos(self, reason) -> dict:
+        c, B = self.core, self.num_envs
+        info = {"tracking_error": c.tracking_errors.copy(), "estimation_errors": c.estimation_errors.copy(),
+                "gamma": c.gamma.copy(), "gamma_s": c.gamma_s.copy()}
+        if c.task_error_key is not None:
+            info[c.task_error_key] = np.array(c.task_errors(), dtype=np.float64)
+        for k in list(info):
+            info[f"_{k}"] = np.ones(B, dtype=bool)
+        if reason is not None:
+            info["termination_reason"] = reason
+            info["_termination_reason"] = reason != 0
+        return info
+
+    def render(self):
+        """Copy 0's error plot (``render_mode="rgb_array"``)."""
+        if self.render_mode is None or self.core.history is None:
+            return None
+        from .rendering import error_plot
+
+        t, te, ee = self.core.history
+        return error_plot(np.asarray(t), np.asarray(te), np.asarray(ee), title=self.metadata["name"])
+
+    def close_extras(self, **kwargs):
+        self.core.history = None
+
+
+def _vec_entry(entry: EnvEntry):
+    """The ``vector_entry_point`` ``make_vec_<name>`` of a registry entry."""
+    def make_vec(num_envs: int = 1, max_episode_steps: int | None = None, **kwargs):
+        return DObsVectorEnv(entry.load_class(), num_envs, max_episode_steps=max_episode_steps, **kwargs)
+
+    make_vec.__name__ = make_vec.__qualname__ = f"make_vec_{entry.name}"
+    make_vec.__doc__ = (f"``gym.make_vec({entry.gym_id!r}, num_envs=...)``: :class:`DObsVectorEnv` over "
+                        f"``{entry.entry_point}``.")
+    return make_vec
+
+
+for _entry in ENVIRONMENTS.values():
+    globals()[f"make_vec_{_entry.name}"] = _vec_entry(_entry)
+del _entry
