@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import ENVS, gym_factory, parallel_factory
-from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy, summarise
+from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy
 from .stats import interval_estimate
 
 __all__ = ["AGENTS", "BUDGETS", "run_benchmark", "format_table", "AgentSpec"]

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
 from dobs_envs.design.gains import shifted_are_feedback
