@@ -157,6 +157,7 @@ class CoreVecEnv(VecEnv):
         return obs, np.repeat(rew, K), dones, infos
 
     def close(self) -> None:
+        self.core.close()
         self._closed = True
 
     @property

@@ -236,7 +236,7 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                           tracking_label=label)
 
     def close(self):
-        self.core.history = None
+        self.core.close()
 
 
 def make_parallel_env(scenario, **options) -> DObsParallelEnv:

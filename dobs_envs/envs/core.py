@@ -423,6 +423,13 @@ class EnvCore:
             h[2].append(self.estimation_errors[0].copy())
         return self._result
 
+    def close(self) -> None:
+        """Stop the worker threads (if any) and drop the render history."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+        self.history = None
+
     def kernel_arguments(self) -> dict:
         """Copies of the arguments of the step kernel except ``u`` (keywords of
         :func:`~dobs_envs.envs.step_kernel.advance_batch`: ``state, W, obs, outs, sig, ka, SF, SI,

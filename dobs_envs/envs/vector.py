@@ -131,7 +131,7 @@ class DObsVectorEnv(VectorEnv):
         return error_plot(np.asarray(t), np.asarray(te), np.asarray(ee), title=self.metadata["name"])
 
     def close_extras(self, **kwargs):
-        self.core.history = None
+        self.core.close()
 
 
 def _vec_entry(entry: EnvEntry):

@@ -210,7 +210,9 @@ def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
     """One control period of a tile of ``W`` copies, copy axis last, in place.
 
     ``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``, ``XR (n, W)``,
-    ``U``/``R (m, W)``; ``W`` must be a compile-time constant (:data:`TILE`, :data:`SMALL_TILE`).
+    ``U``/``R (m, W)``; ``W`` must be a compile-time constant (:data:`TILE`, :data:`SMALL_TILE`):
+    call it from compiled code with a constant (from Python, every call would recompile), and
+    prefer widths of 32 or more (LLVM unrolls narrower tiles completely: minutes of compilation).
     Per copy the same operations in the same order as :func:`period_copy`; the innermost
     loops run over the copies (SIMD), each pass over the copies adding up to four terms.
     """
