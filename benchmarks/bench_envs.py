@@ -1,107 +1,226 @@
-"""Single-environment control steps per second of ``tracking_v0`` and ``gym.make("dobs_envs/Tracking-v0")``.
+"""Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and today's main.
 
-Usage: python benchmarks/bench_envs.py [--steps 20000] [--substeps 50] [--profile]
+Usage: python benchmarks/bench_envs.py [--main /work/main] [--repeats 7] [--seconds 0.4] [--no-main]
 
-Random actions (a pool drawn beforehand from the action spaces, so sampling is
-not timed), default options, episodes reset when they end (resets included),
-after a warm-up; ``--steps`` are split into ``--repeats`` interleaved short runs of the
-kernel, the parallel env and the Gymnasium env, and the best run of each is reported
-(shared machines are noisy). Also
-prints the cost of ``step_env`` alone for the same control period, i.e. the
-floor the environment's Python layer adds to. ``--profile`` prints the top of
-a cProfile of the parallel env loop.
+Everything is measured side by side in one run, interleaved (config A, B, C, ..., A, B, C,
+...), best of ``--repeats`` short runs of about ``--seconds`` each (the machines are shared
+with training runs: only ratios measured this way mean anything):
+
+- single env: ``gym.make("dobs_envs/Tracking-v0")`` control steps/s (random actions from a
+  pool drawn beforehand, resets included) and the PettingZoo ``tracking_v0.parallel_env``;
+- vector env: ``gym.make_vec("dobs_envs/Tracking-v0", num_envs=B)`` env-steps/s
+  (``B`` x steps/s) at B = 1, 64, 1024, serial (``threads=1``) and with one thread per core
+  (``threads=None``, the default: ranges of copies advanced concurrently, GIL released);
+- the same single envs of another checkout (``--main``, default ``/work/main``: today's
+  main) in a worker process started with that checkout first on ``sys.path`` (and its own
+  numba cache directory, so nothing is written into it), timed in the same interleaved loop.
+
+It also reports the floating-point operations of one control step (simulation kernel +
+features/reward, counted from the kernels' loops) and the fraction of the 2-core FMA peak the
+B = 1024 vector env reaches: peak = cores x FMA units (2) x doubles per vector (8 with
+AVX-512, 4 with AVX2) x 2 flops x clock (``cpu MHz`` of /proc/cpuinfo).
 """
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
 
+ENV_ID = "dobs_envs/Tracking-v0"
+POOL = 512
 
-def run_parallel(env, pool, steps):
-    obs, _ = env.reset(seed=0)
-    n = len(pool)
+WORKER = r'''
+import json, sys, time
+import numpy as np
+import gymnasium as gym
+import dobs_envs
+from dobs_envs import tracking_v0
+genv = gym.make("dobs_envs/Tracking-v0")
+penv = tracking_v0.parallel_env()
+rng = np.random.default_rng(0)
+gpool = [genv.action_space.low + (genv.action_space.high - genv.action_space.low) * rng.random(5).astype(np.float32)
+         for _ in range(512)]
+ppool = [{a: g[k:k + 1] for k, a in enumerate(penv.possible_agents)} for g in gpool]
+genv.reset(seed=0); penv.reset(seed=0)
+def run_gym(n):
     t0 = time.perf_counter()
-    for k in range(steps):
-        if not env.agents:
-            env.reset()
-        env.step(pool[k % n])
-    return steps / (time.perf_counter() - t0)
-
-
-def run_gym(env, pool, steps):
-    env.reset(seed=0)
-    n = len(pool)
+    for k in range(n):
+        _, _, te, tr, _ = genv.step(gpool[k % 512])
+        if te or tr:
+            genv.reset()
+    return n / (time.perf_counter() - t0)
+def run_pz(n):
     t0 = time.perf_counter()
-    for k in range(steps):
-        _, _, term, trunc, _ = env.step(pool[k % n])
-        if term or trunc:
-            env.reset()
-    return steps / (time.perf_counter() - t0)
+    for k in range(n):
+        if not penv.agents:
+            penv.reset()
+        penv.step(ppool[k % 512])
+    return n / (time.perf_counter() - t0)
+run_gym(500); run_pz(500)
+print(json.dumps({"file": dobs_envs.__file__}), flush=True)
+for line in sys.stdin:
+    what, n = line.split()
+    print(json.dumps((run_gym if what == "gym" else run_pz)(int(n))), flush=True)
+'''
+
+
+class Worker:
+    """The single envs of a checkout in a subprocess (that checkout first on sys.path)."""
+
+    def __init__(self, checkout: str):
+        env = dict(os.environ, PYTHONPATH=checkout, PYTHONDONTWRITEBYTECODE="1",
+                   NUMBA_CACHE_DIR=os.path.join(tempfile.gettempdir(), "dobs_bench_numba_" + checkout.strip("/").replace("/", "_")))
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     text=True, env=env, cwd=tempfile.gettempdir())
+        self.file = json.loads(self.proc.stdout.readline())["file"]
+
+    def run(self, what: str, n: int) -> float:
+        self.proc.stdin.write(f"{what} {n}\n")
+        self.proc.stdin.flush()
+        return float(json.loads(self.proc.stdout.readline()))
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def peak_flops() -> tuple[float, str]:
+    flags, mhz = "", 0.0
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("flags") and not flags:
+                    flags = line
+                elif line.startswith("cpu MHz") and not mhz:
+                    mhz = float(line.split(":")[1])
+    except OSError:
+        pass
+    lanes = 8 if " avx512f" in flags else (4 if " fma" in flags else 2)
+    cores = os.cpu_count() or 1
+    peak = cores * 2 * lanes * 2 * mhz * 1e6
+    return peak, f"{cores} cores x 2 FMA units x {lanes} doubles x 2 flops x {mhz / 1000:.2f} GHz"
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--steps", type=int, default=20000)
-    ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--substeps", type=int, default=50)
-    ap.add_argument("--profile", action="store_true")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--main", default="/work/main", help="checkout to compare the single envs with")
+    ap.add_argument("--no-main", action="store_true")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
+    ap.add_argument("--batches", default="1,64,1024")
     args = ap.parse_args(argv)
 
     import gymnasium as gym
 
-    import dobs_envs  # noqa: F401  (registers the Gymnasium ids)
+    import dobs_envs  # noqa: F401
     from dobs_envs import tracking_v0
-    from dobs_envs.sim import step_env
+    from dobs_envs.envs.features import flops_per_row
+    from dobs_envs.sim.kernel import flops_per_period
 
-    penv = tracking_v0.parallel_env(substeps=args.substeps)
-    penv.reset(seed=0)
+    # ---------------------------------------------------------------- contestants
     rng = np.random.default_rng(0)
-    pool = [{a: penv.action_space(a).low + (penv.action_space(a).high - penv.action_space(a).low)
-             * rng.random(penv.action_space(a).shape).astype(np.float32) for a in penv.possible_agents}
-            for _ in range(1000)]
-    genv = gym.make("dobs_envs/Tracking-v0", substeps=args.substeps)
-    gpool = [genv.action_space.sample() for _ in range(1000)]
+    genv = gym.make(ENV_ID)
+    lo, hi = genv.action_space.low, genv.action_space.high
+    gpool = [lo + (hi - lo) * rng.random(5).astype(np.float32) for _ in range(POOL)]
+    penv = tracking_v0.parallel_env()
+    ppool = [{a: g[k:k + 1] for k, a in enumerate(penv.possible_agents)} for g in gpool]
+    genv.reset(seed=0)
+    penv.reset(seed=0)
 
-    # step_env alone (the floor)
-    st, p = penv.sim_state, penv.params
-    u = np.zeros((1, p.n_inputs)); r = np.zeros((1, p.n_inputs))
-
-    def run_kernel(steps):
+    def run_gym(n):
         t0 = time.perf_counter()
-        for _ in range(steps):
-            step_env(st, u, p, r, validate=False)
-        return steps / (time.perf_counter() - t0)
+        for k in range(n):
+            _, _, te, tr, _ = genv.step(gpool[k % POOL])
+            if te or tr:
+                genv.reset()
+        return n / (time.perf_counter() - t0)
 
-    run_kernel(500)
-    run_parallel(penv, pool, 2000)  # warm-up
-    run_gym(genv, gpool, 2000)
-    # interleaved short runs, best of each: robust to load bursts on shared machines
-    chunk = max(200, args.steps // args.repeats)
-    best_k = par = gy = 0.0
-    for _ in range(args.repeats):
-        best_k = max(best_k, run_kernel(chunk))
-        par = max(par, run_parallel(penv, pool, chunk))
-        gy = max(gy, run_gym(genv, gpool, chunk))
-    best_k = 1.0 / best_k
-    period = penv.control_period
-    print(f"tracking_v0 (NE2, dt={penv.dt:g}, substeps={penv.substeps}, control period {period:g} s), single env, random actions:")
-    print(f"  step_env alone             : {best_k * 1e6:7.1f} us/step  -> {1 / best_k:9,.0f} steps/s (ceiling)")
-    print(f"  PettingZoo parallel_env    : {1e6 / par:7.1f} us/step  -> {par:9,.0f} control steps/s"
-          f"  ({par * period:,.0f} simulated s per wall s)")
-    print(f"  gym.make('dobs_envs/Tracking-v0'): {1e6 / gy:7.1f} us/step  -> {gy:9,.0f} control steps/s")
-    print(f"  Python overhead over step_env: parallel {1e6 / par - best_k * 1e6:.1f} us, gym {1e6 / gy - best_k * 1e6:.1f} us")
+    def run_pz(n):
+        t0 = time.perf_counter()
+        for k in range(n):
+            if not penv.agents:
+                penv.reset()
+            penv.step(ppool[k % POOL])
+        return n / (time.perf_counter() - t0)
 
-    if args.profile:
-        import cProfile
-        import pstats
+    batches = [int(b) for b in args.batches.split(",")]
+    vec = {}
+    for B in batches:
+        for par in (False, True):
+            v = gym.make_vec(ENV_ID, num_envs=B, threads=None if par else 1)
+            v.reset(seed=0)
+            acts = [v.action_space.low + (v.action_space.high - v.action_space.low)
+                    * rng.random(v.action_space.shape).astype(np.float32) for _ in range(8)]
+            vec[(B, par)] = (v, acts)
 
-        pr = cProfile.Profile()
-        pr.enable()
-        run_parallel(penv, pool, args.steps)
-        pr.disable()
-        pstats.Stats(pr).sort_stats("tottime").print_stats(15)
+    def run_vec(key, n):
+        v, acts = vec[key]
+        t0 = time.perf_counter()
+        for k in range(n):
+            v.step(acts[k % 8])
+        return n * key[0] / (time.perf_counter() - t0)
+
+    worker = None if args.no_main else Worker(args.main)
+    configs = {"gym single (this checkout)": ("gym", None), "PettingZoo single (this checkout)": ("pz", None)}
+    if worker is not None:
+        configs["gym single (main)"] = ("gym", "main")
+        configs["PettingZoo single (main)"] = ("pz", "main")
+    for key in vec:
+        configs[f"vector B={key[0]}{' threads' if key[1] else ''}"] = ("vec", key)
+
+    # ---------------------------------------------------------------- calibrate run lengths, warm up
+    steps = {}
+    for name, (kind, key) in configs.items():
+        fn = {"gym": run_gym, "pz": run_pz}.get(kind)
+        if kind == "vec":
+            rate = run_vec(key, 3) / key[0]
+        elif key == "main":
+            rate = worker.run(kind, 300)
+        else:
+            rate = fn(300)
+        steps[name] = max(3, int(rate * args.seconds))
+    best = dict.fromkeys(configs, 0.0)
+    for _ in range(args.repeats):  # interleaved
+        for name, (kind, key) in configs.items():
+            if kind == "vec":
+                r = run_vec(key, steps[name])
+            elif key == "main":
+                r = worker.run(kind, steps[name])
+            else:
+                r = {"gym": run_gym, "pz": run_pz}[kind](steps[name])
+            best[name] = max(best[name], r)
+    if worker is not None:
+        main_file = worker.file
+        worker.close()
+
+    # ---------------------------------------------------------------- report
+    core = vec[(batches[-1], False)][0].core
+    flops = flops_per_period(core.params) + flops_per_row(core)
+    peak, peak_desc = peak_flops()
+    single = best["gym single (this checkout)"]
+    print(f"{ENV_ID} (NE2, n={core.n_states}, N={core.n_nodes}, {core.substeps} Euler substeps per control step), "
+          f"best of {args.repeats} interleaved runs of ~{args.seconds:g} s")
+    print(f"{'configuration':36s} {'env-steps/s':>13s} {'x gym single':>13s}")
+    for name in configs:
+        print(f"{name:36s} {best[name]:13,.0f} {best[name] / single:13.2f}")
+    if worker is not None:
+        print(f"main checkout imported from {main_file}")
+        print(f"single env vs main: gym {single / best['gym single (main)']:.2f}x, PettingZoo "
+              f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (main)']:.2f}x")
+    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}")), key=lambda k: best[k])
+    print(f"best B={batches[-1]}: {top} = {best[top] / single:.1f}x the gym single env (target >= 8x)")
+    print(f"flops per control step: {flops:,} ({flops_per_period(core.params):,} simulation + "
+          f"{flops_per_row(core):,} features/reward)")
+    for name in configs:
+        if name.startswith(f"vector B={batches[-1]}"):
+            print(f"{name}: {best[name] * flops / 1e9:.1f} GFLOP/s = {best[name] * flops / peak:.1%} of the peak "
+                  f"{peak / 1e9:.0f} GFLOP/s ({peak_desc})")
 
 
 if __name__ == "__main__":
