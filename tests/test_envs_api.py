@@ -4,7 +4,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test
 
 import dobs_envs
 from dobs_envs import disturbance_rejection_v0, hetero_mas_v0, random_network_v0, tracking_v0
@@ -28,6 +28,11 @@ def test_aec_api_and_seed(mod):
         warnings.simplefilter("ignore", UserWarning)
         api_test(mod.env(max_cycles=20), num_cycles=30)
         parallel_seed_test(lambda: mod.parallel_env(max_cycles=20), num_cycles=25)
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=IDS)
+def test_max_cycles(mod):
+    max_cycles_test(mod)  # parallel and AEC forms end after exactly max_cycles steps
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=IDS)

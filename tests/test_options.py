@@ -86,3 +86,11 @@ def test_options_are_frozen_and_normalised():
     assert o.replace(dt=2e-3).dt == 2e-3
     with pytest.raises(ValueError, match="kind"):
         RandomNetworkOptions(kind="tree")
+
+
+def test_extra_options_are_derived_from_the_dataclass():
+    from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
+
+    assert TrackingEnv.EXTRA_OPTIONS == {}
+    assert HeteroMASEnv.EXTRA_OPTIONS == {"q_rest": 0.1, "r": 1.0, "rho": 1e-3}
+    assert set(RandomNetworkEnv.EXTRA_OPTIONS) == set(RandomNetworkOptions.names()) - set(EnvOptions.names())

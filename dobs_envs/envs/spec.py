@@ -25,6 +25,13 @@ class EnvSpec:
     REJECT_OPTIONS: tuple = ()
     #: default action bound (per input component) of user scenarios without one: "auto" (calibrated)
     DEFAULT_ACTION_BOUND = "auto"
+    #: the class's options beyond :class:`EnvOptions` with their defaults (derived from ``Options``)
+    EXTRA_OPTIONS: dict = {}
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        common = EnvOptions.defaults()
+        cls.EXTRA_OPTIONS = {k: v for k, v in cls.Options.defaults().items() if k not in common}
 
     @classmethod
     def _default_scenario(cls, opts):
