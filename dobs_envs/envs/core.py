@@ -56,7 +56,7 @@ from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions
 from ..sim.kernel import TILE
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, advance_batch,
-                          advance_range, first_non_finite, pack_kernel_args)
+                          advance_range, first_non_finite)
 
 
 #: reward shape -> code passed to the compiled step (0 quadratic, 1 log, 2 sqrt)
@@ -215,7 +215,7 @@ class EnvCore:
         ref = np.zeros((3, m))
         if self.has_reference:
             ref[0], ref[1], ref[2] = sc.reference.amplitude, sc.reference.frequency, sc.reference.phase
-        self._ka = pack_kernel_args(p.kernel_tuple)
+        self._ka = p.kernel_packed
         self._SF, self._SI = pack_static(p.C, p.G_bar, ref, self.Q, self.R, L.offsets(p_i), L.padded_index, L.size)
         big = float(np.finfo(self.obs_dtype).max)
         self._consts = (np.ascontiguousarray(-bound), np.ascontiguousarray(bound), self.control_period,
@@ -436,7 +436,7 @@ class EnvCore:
         consts``), e.g. to run a kernel and its numpy reference from the core's current state."""
         cp = lambda arrs: tuple(a.copy() for a in arrs)  # noqa: E731
         return {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
-                "sig": self._sig.copy(), "ka": cp(self._ka), "SF": self._SF.copy(), "SI": self._SI.copy(),
+                "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF.copy(), "SI": self._SI.copy(),
                 "consts": self._consts}
 
     # ------------------------------------------------------------------ read-out

@@ -17,7 +17,8 @@ from ..sim.numpy_step import control_period_numpy
 from ..sim.state import KernelArgs
 from .features import unpack_static
 from .numpy_features import write_features_reference
-from .step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, unpack_kernel_args
+from ..sim.kernel import unpack_kernel_args
+from .step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND
 
 __all__ = ["advance_reference"]
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sim.kernel import TILE, advance_rows
+from ..sim.kernel import advance_rows, unpack_kernel_args
 from .features import features_row, unpack_static
 
 try:
@@ -35,90 +35,11 @@ except ImportError:  # pragma: no cover
     def _njit(f):
         return f
 
-__all__ = ["advance_batch", "advance_range", "first_non_finite", "pack_kernel_args", "unpack_kernel_args",
-           "REASON_NONE", "REASON_STATE_BOUND", "REASON_NON_FINITE", "REASON_HORIZON"]
+__all__ = ["advance_batch", "advance_range", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
+           "REASON_NON_FINITE", "REASON_HORIZON"]
 
 #: reason codes (int8) of a step
 REASON_NONE, REASON_STATE_BOUND, REASON_NON_FINITE, REASON_HORIZON = 0, 1, 2, 3
-
-
-def pack_kernel_args(ka) -> tuple:
-    """:class:`~dobs_envs.sim.state.KernelArgs` packed into ``(KF float64, KI int64)`` buffers (two
-    arrays to dispatch instead of 55 on the per-step path); :func:`unpack_kernel_args` inverts it."""
-    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
-    n, m, mv = B.shape[0], B.shape[1], B_v.shape[1]
-    N, p, r, D = C.shape[0], C.shape[1], Q_proj.shape[2], nbr_idx.shape[1]
-    dense = [np.ravel(a) for a in (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, nbr_w, deg, A_r,
-                                    phi, phi_s, sigma, sigma_s, Phi_v)] + [[float(dt)]]
-    head = [n, m, mv, N, p, r, D, int(substeps), int(bool(has_reference)), len(rows)]
-    ints = [np.asarray(proj_range, dtype=np.int64), np.ravel(nbr_idx)]
-    fpos = sum(a.size if hasattr(a, "size") else len(a) for a in dense)
-    ipos = len(head) + 5 * len(rows) + N + N * D
-    table = []
-    for ptr, col, val, row, gcol in rows:  # (ptr offset, rows + 1, col offset, nnz, val offset)
-        table += [ipos, ptr.size, ipos + ptr.size, col.size, fpos]
-        ints += [ptr, col, row, gcol]
-        dense.append(val)
-        ipos += ptr.size + 3 * col.size
-        fpos += val.size
-    KF = np.concatenate([np.asarray(a, dtype=np.float64) for a in dense])
-    KI = np.concatenate([np.asarray(head + table, dtype=np.int64)] + [np.asarray(a, dtype=np.int64) for a in ints])
-    return KF, KI
-
-
-@_njit
-def _rows(KF, KI, f):
-    t = 10 + 5 * f
-    po, pn, co, nz, vo = KI[t], KI[t + 1], KI[t + 2], KI[t + 3], KI[t + 4]
-    return KI[po:po + pn], KI[co:co + nz], KF[vo:vo + nz], KI[co + nz:co + 2 * nz], KI[co + 2 * nz:co + 3 * nz]
-
-
-@_njit
-def unpack_kernel_args(KF, KI):
-    """The ``KernelArgs`` tuple (views of ``KF``/``KI``; ``proj_range`` as 0/1 integers)."""
-    n, m, mv, N, p, r, D, substeps, has_ref, nf = KI[0], KI[1], KI[2], KI[3], KI[4], KI[5], KI[6], KI[7], KI[8], KI[9]
-    a = 0
-    A = KF[a:a + n * n].reshape((n, n))
-    a += n * n
-    B = KF[a:a + n * m].reshape((n, m))
-    a += n * m
-    B_v = KF[a:a + n * mv].reshape((n, mv))
-    a += n * mv
-    C = KF[a:a + N * p * n].reshape((N, p, n))
-    a += N * p * n
-    E_bar = KF[a:a + N * n * n].reshape((N, n, n))
-    a += N * n * n
-    F_bar = KF[a:a + N * n * p].reshape((N, n, p))
-    a += N * n * p
-    G_bar = KF[a:a + N * n * p].reshape((N, n, p))
-    a += N * n * p
-    B_bar = KF[a:a + N * n * m].reshape((N, n, m))
-    a += N * n * m
-    Q_proj = KF[a:a + N * n * r].reshape((N, n, r))
-    a += N * n * r
-    nbr_w = KF[a:a + N * D].reshape((N, D))
-    a += N * D
-    deg = KF[a:a + N]
-    a += N
-    A_r = KF[a:a + n * n].reshape((n, n))
-    a += n * n
-    phi = KF[a:a + N]
-    phi_s = KF[a + N:a + 2 * N]
-    sigma = KF[a + 2 * N:a + 3 * N]
-    sigma_s = KF[a + 3 * N:a + 4 * N]
-    a += 4 * N
-    Phi_v = KF[a:a + mv * mv].reshape((mv, mv))
-    a += mv * mv
-    dt = KF[a]
-    o = 10 + 5 * nf
-    proj_range = KI[o:o + N]
-    nbr_idx = KI[o + N:o + N + N * D].reshape((N, D))
-    rows = (_rows(KF, KI, 0), _rows(KF, KI, 1), _rows(KF, KI, 2), _rows(KF, KI, 3), _rows(KF, KI, 4),
-            _rows(KF, KI, 5), _rows(KF, KI, 6), _rows(KF, KI, 7), _rows(KF, KI, 8), _rows(KF, KI, 9),
-            _rows(KF, KI, 10), _rows(KF, KI, 11))
-    return (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-            phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_ref != 0, rows)
 
 
 @_njit
@@ -228,7 +149,7 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
         terminated, truncated; reason (B,) int8; cycles (B,) int64), written.
     u : (B, m) float64 requested inputs (read).
     sig : (3, B, m_v, L): amplitudes, frequencies, phases of the "random" disturbance.
-    ka : (KF, KI) of :func:`pack_kernel_args`; SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
+    ka : ``SimParams.kernel_packed`` (KF, KI); SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
     consts : (u_lo (m,), u_hi (m,), period, state_bound, bound_step_cost, log_c0, big_obs,
         max_cycles (-1: none), penalty_cycles, has_ref, reward_code (0 quadratic, 1 log, 2 sqrt), termination_penalty, random_v).
 

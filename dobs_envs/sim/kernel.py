@@ -31,7 +31,8 @@ FMA contraction -- so a copy's trajectory does not depend on the batch size or o
 position in the batch (tested bit for bit).
 
 The constants arrive as one :class:`~dobs_envs.sim.state.KernelArgs` tuple
-(``SimParams.kernel_tuple``, built once per parameter set).
+(``SimParams.kernel_tuple``, built once per parameter set); from Python they are passed packed
+into two buffers (``SimParams.kernel_packed``, unpacked by :func:`unpack_kernel_args`).
 """
 from __future__ import annotations
 
@@ -68,6 +69,7 @@ except ImportError:  # pragma: no cover
 
 
 __all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "SMALL_TILE", "MIN_TILE", "period_copy", "period_tile", "advance_rows",
+           "unpack_kernel_args",
            "control_period_compiled", "flops_per_period"]
 
 
@@ -398,7 +400,61 @@ def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
 
 
 @_njit
-def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, ka):
+def _rows(KF, KI, f):
+    t = 10 + 5 * f
+    po, pn, co, nz, vo = KI[t], KI[t + 1], KI[t + 2], KI[t + 3], KI[t + 4]
+    return KI[po:po + pn], KI[co:co + nz], KF[vo:vo + nz], KI[co + nz:co + 2 * nz], KI[co + 2 * nz:co + 3 * nz]
+
+
+@_njit
+def unpack_kernel_args(KF, KI):
+    """The ``KernelArgs`` tuple (views of ``KF``/``KI``; ``proj_range`` as 0/1 integers)."""
+    n, m, mv, N, p, r, D, substeps, has_ref, nf = KI[0], KI[1], KI[2], KI[3], KI[4], KI[5], KI[6], KI[7], KI[8], KI[9]
+    a = 0
+    A = KF[a:a + n * n].reshape((n, n))
+    a += n * n
+    B = KF[a:a + n * m].reshape((n, m))
+    a += n * m
+    B_v = KF[a:a + n * mv].reshape((n, mv))
+    a += n * mv
+    C = KF[a:a + N * p * n].reshape((N, p, n))
+    a += N * p * n
+    E_bar = KF[a:a + N * n * n].reshape((N, n, n))
+    a += N * n * n
+    F_bar = KF[a:a + N * n * p].reshape((N, n, p))
+    a += N * n * p
+    G_bar = KF[a:a + N * n * p].reshape((N, n, p))
+    a += N * n * p
+    B_bar = KF[a:a + N * n * m].reshape((N, n, m))
+    a += N * n * m
+    Q_proj = KF[a:a + N * n * r].reshape((N, n, r))
+    a += N * n * r
+    nbr_w = KF[a:a + N * D].reshape((N, D))
+    a += N * D
+    deg = KF[a:a + N]
+    a += N
+    A_r = KF[a:a + n * n].reshape((n, n))
+    a += n * n
+    phi = KF[a:a + N]
+    phi_s = KF[a + N:a + 2 * N]
+    sigma = KF[a + 2 * N:a + 3 * N]
+    sigma_s = KF[a + 3 * N:a + 4 * N]
+    a += 4 * N
+    Phi_v = KF[a:a + mv * mv].reshape((mv, mv))
+    a += mv * mv
+    dt = KF[a]
+    o = 10 + 5 * nf
+    proj_range = KI[o:o + N]
+    nbr_idx = KI[o + N:o + N + N * D].reshape((N, D))
+    rows = (_rows(KF, KI, 0), _rows(KF, KI, 1), _rows(KF, KI, 2), _rows(KF, KI, 3), _rows(KF, KI, 4),
+            _rows(KF, KI, 5), _rows(KF, KI, 6), _rows(KF, KI, 7), _rows(KF, KI, 8), _rows(KF, KI, 9),
+            _rows(KF, KI, 10), _rows(KF, KI, 11))
+    return (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+            phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_ref != 0, rows)
+
+
+@_njit
+def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, KF, KI):
     # copies made inside compiled code: ~4 us cheaper per call than numpy .copy() x 6
     x = x.copy()
     z = z.copy()
@@ -406,7 +462,7 @@ def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, ka):
     gamma_s = gamma_s.copy()
     v = v.copy()
     x_r = x_r.copy()
-    advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, x.shape[0])
+    advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, unpack_kernel_args(KF, KI), 0, x.shape[0])
     return x, z, gamma, gamma_s, v, x_r
 
 
@@ -420,7 +476,7 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
         u = np.ascontiguousarray(u, dtype=np.float64)
     if r.dtype != np.float64 or not r.flags.c_contiguous:
         r = np.ascontiguousarray(r, dtype=np.float64)
-    return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_tuple)
+    return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, *p.kernel_packed)
 
 
 def flops_per_period(p, *, dense: bool = False) -> int:

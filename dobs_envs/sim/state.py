@@ -23,7 +23,7 @@ from scipy.linalg import expm
 
 from ..linalg.validation import as_array
 
-__all__ = ["SimState", "SimParams", "KernelArgs", "ROW_MATRICES", "compress_rows"]
+__all__ = ["SimState", "SimParams", "KernelArgs", "ROW_MATRICES", "compress_rows", "pack_kernel_args"]
 
 
 def _ro(a, shape=None) -> np.ndarray:
@@ -113,6 +113,33 @@ def compress_rows(M, per_node_input: bool = False) -> tuple:
     ptr = np.concatenate([[0], np.cumsum(nz.sum(axis=1))])
     gcol = (row // K) * L + col if per_node_input else col
     return _ro_int(ptr), _ro_int(col), _ro(rows[nz]), _ro_int(row), _ro_int(gcol)
+
+
+def pack_kernel_args(ka) -> tuple:
+    """:class:`KernelArgs` packed into ``(KF float64, KI int64)`` buffers: two arrays to dispatch
+    instead of ~80 on the per-step path; :func:`dobs_envs.sim.kernel.unpack_kernel_args` inverts it
+    inside compiled code."""
+    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
+     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
+    n, m, mv = B.shape[0], B.shape[1], B_v.shape[1]
+    N, p, r, D = C.shape[0], C.shape[1], Q_proj.shape[2], nbr_idx.shape[1]
+    dense = [np.ravel(a) for a in (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, nbr_w, deg, A_r,
+                                    phi, phi_s, sigma, sigma_s, Phi_v)] + [[float(dt)]]
+    head = [n, m, mv, N, p, r, D, int(substeps), int(bool(has_reference)), len(rows)]
+    ints = [np.asarray(proj_range, dtype=np.int64), np.ravel(nbr_idx)]
+    fpos = sum(a.size if hasattr(a, "size") else len(a) for a in dense)
+    ipos = len(head) + 5 * len(rows) + N + N * D
+    table = []
+    for ptr, col, val, row, gcol in rows:  # (ptr offset, rows + 1, col offset, nnz, val offset)
+        table += [ipos, ptr.size, ipos + ptr.size, col.size, fpos]
+        ints += [ptr, col, row, gcol]
+        dense.append(val)
+        ipos += ptr.size + 3 * col.size
+        fpos += val.size
+    KF = np.concatenate([np.asarray(a, dtype=np.float64) for a in dense])
+    KI = np.concatenate([np.asarray(head + table, dtype=np.int64)] + [np.asarray(a, dtype=np.int64) for a in ints])
+    KF.flags.writeable = KI.flags.writeable = False
+    return KF, KI
 
 
 class KernelArgs(NamedTuple):
@@ -259,6 +286,11 @@ class SimParams:
                                      per_node_input=vec.endswith("_i"))
                        for name, vec in ROW_MATRICES),
         )
+
+    @cached_property
+    def kernel_packed(self) -> tuple:
+        """:attr:`kernel_args` packed into two buffers (:func:`pack_kernel_args`; built once)."""
+        return pack_kernel_args(self.kernel_args)
 
     @cached_property
     def kernel_tuple(self) -> tuple:
