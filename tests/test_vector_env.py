@@ -6,7 +6,9 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_reset_seed_determinism, check_space_limit, data_equivalence
+from gymnasium.utils.env_checker import (check_reset_seed_determinism, check_returned_data_not_reused,
+                                        check_space_limit, data_equivalence)
+from gymnasium.utils.passive_env_checker import env_reset_passive_checker
 from gymnasium.vector.vector_env import AutoresetMode
 
 import dobs_envs
@@ -38,6 +40,9 @@ def test_make_vec_for_every_id(env_id):
         check_space_limit(venv.single_observation_space, "observation")
         check_space_limit(venv.single_action_space, "action")
         check_reset_seed_determinism(venv)
+        env_reset_passive_checker(venv)
+        # (bool(terminated) of a batch is only defined for one copy)
+        check_returned_data_not_reused(gym.make_vec(env_id, num_envs=1))
     venv.close()
     single.close()
 
