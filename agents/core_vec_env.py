@@ -89,7 +89,8 @@ class CoreVecEnv(VecEnv):
     def _encode(self) -> np.ndarray:
         c = self.core
         if not self.shared:
-            return c.observations.reshape(self.n_copies, -1)[:, self._cat].astype(self._dtype, copy=False)
+            flat = c.observations.reshape(self.n_copies, -1)
+            return flat.copy() if c.layout.uniform else flat[:, self._cat]
         o = c.observations.reshape(self.num_envs, c.obs_dim).astype(np.float32)
         return o if self._onehot is None else np.concatenate([o, self._onehot], axis=1)
 

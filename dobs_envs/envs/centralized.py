@@ -120,7 +120,8 @@ class CentralizedEnv(gym.Env):
         return self._obs(), float(res.reward[0]), term, trunc, info
 
     def _obs(self) -> np.ndarray:
-        return self.core.observations[0].reshape(-1)[self._cat]  # a new array
+        flat = self.core.observations[0].reshape(-1)
+        return flat.copy() if self.core.layout.uniform else flat[self._cat]  # a new array
 
     def _info(self) -> dict:
         c = self.core

@@ -163,6 +163,8 @@ class FeatureLayout:
         #: ``padded.reshape(-1)[concat_index]`` is the agents' observations concatenated
         self.concat_index = np.concatenate([k * self.obs_dim + np.arange(w) for k, w in enumerate(self.widths)]) \
             .astype(np.intp) if len(self.widths) else np.zeros(0, dtype=np.intp)
+        #: every agent observes ``obs_dim`` values: the padded rows are already the concatenation
+        self.uniform = bool(np.all(self.widths == self.obs_dim))
 
     def state_index(self, has_reference: bool):
         """Gather of the global state ``(x, x_r if tracking, xhat_0..xhat_{N-1}, v)`` from ``f`` and its

@@ -106,7 +106,8 @@ class DObsVectorEnv(VectorEnv):
         return self._obs(), rew, term, trunc, self._infos(reason)
 
     def _obs(self) -> np.ndarray:
-        return self.core.observations.reshape(self.num_envs, -1)[:, self._cat]  # a new array
+        flat = self.core.observations.reshape(self.num_envs, -1)
+        return flat.copy() if self.core.layout.uniform else flat[:, self._cat]  # a new array
 
     def _infos(self, reason) -> dict:
         c, B = self.core, self.num_envs
