@@ -73,13 +73,11 @@ class CoreVecEnv(VecEnv):
             self._gather = np.concatenate([k * A + np.arange(s.stop - s.start)
                                            for k, s in enumerate(c.channel_slices)]).astype(np.intp)
             self._onehot = np.tile(np.eye(K, dtype=np.float32), (B, 1)) if agent_id else None
-            self._dtype = np.float32
         else:
             self.encoder = None
             obs_space = central_obs
             act_space = spaces.Box(-1.0, 1.0, central_act.shape, dtype=np.float32) if rescale_actions else central_act
             self._cat = c.layout.concat_index
-            self._dtype = c.obs_dtype
         super().__init__(B * K, obs_space, act_space)
         self._actions = None
         self._copy_seeds: list | None = None
