@@ -9,82 +9,30 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
-
 import numpy as np
 
-from .control import paper_policy
+from .rollout import Trajectory, rollout, rollout_reference, window_stats
 from .scenarios.paper import PAPER_SCENARIOS
-from .sim import estimates, step_env
+
+#: studies run by ``dobs-envs reproduce <study>`` (:mod:`dobs_envs.studies`)
+STUDIES = ("convergence", "theorem6")
 
 __all__ = ["Trajectory", "simulate", "metrics", "reproduce", "add_parser"]
 
 
-@dataclass(frozen=True)
-class Trajectory:
-    """Time series of one closed-loop run (one environment), sampled every Euler step.
-
-    t (T,), x (T, n), x_r (T, n) or None, est_err (T, N) = ||xhat_i - x||,
-    gamma/gamma_s (T, N), u (T, m) (input applied on [t_k, t_{k+1})), beta (T, Nc) or None.
-    """
-
-    t: np.ndarray
-    x: np.ndarray
-    x_r: np.ndarray | None
-    est_err: np.ndarray
-    gamma: np.ndarray
-    gamma_s: np.ndarray
-    u: np.ndarray
-    beta: np.ndarray | None
-
-    @property
-    def tracking_error(self) -> np.ndarray:
-        """``||x - x_r||`` (or ``||x||`` for stabilisation), (T,)."""
-        e = self.x if self.x_r is None else self.x - self.x_r
-        return np.linalg.norm(e, axis=-1)
-
-
 def simulate(sc, *, t_end: float | None = None, dt: float | None = None, backend: str = "numba",
              progress: bool = False) -> Trajectory:
-    """Simulate scenario ``sc`` with its paper controller at control period ``dt``."""
-    params = sc.sim_params(dt=dt, substeps=1)
-    t_end = sc.t_end if t_end is None else float(t_end)
-    steps = int(round(t_end / params.dt))
-    state = sc.initial_state(params)
-    ctrl = paper_policy(sc)
-    cstate = ctrl.initial_state(1)
-    n, N, m = params.n_states, params.n_nodes, params.n_inputs
-    has_beta = getattr(ctrl, "kind", None) in ("sliding_mode", "adaptive_sliding_mode")
-    T = steps + 1
-    xs = np.empty((T, n)); xrs = np.empty((T, n)); ee = np.empty((T, N))
-    gs = np.empty((T, N)); gss = np.empty((T, N)); us = np.zeros((T, m))
-    bs = np.empty((T, ctrl.n_controllers)) if has_beta else None
-    it = range(steps + 1)
-    if progress:
-        from tqdm.auto import tqdm
-        it = tqdm(it, desc=sc.name, unit="step", mininterval=0.5, leave=False)
-    for k in it:
-        xhat = estimates(state, params)
-        xs[k] = state.x[0]; xrs[k] = state.x_r[0]
-        ee[k] = np.linalg.norm(xhat[0] - state.x[0], axis=-1)
-        gs[k] = state.gamma[0]; gss[k] = state.gamma_s[0]
-        if has_beta:
-            bs[k] = cstate.beta[0]
-        if k == steps:
-            break
-        u, cstate = ctrl.act(xhat, state.t, cstate, params.dt)
-        us[k] = u[0]
-        state = step_env(state, u, params, _ref(sc, state.t), backend=backend, validate=False)
-    us[-1] = us[-2] if T > 1 else us[-1]
-    return Trajectory(t=np.arange(T) * params.dt, x=xs, x_r=xrs if sc.reference is not None else None,
-                      est_err=ee, gamma=gs, gamma_s=gss, u=us, beta=bs)
+    """Simulate scenario ``sc`` with its paper controller at control period ``dt``.
 
-
-def _ref(sc, t):
-    """Held reference command of the reference model (refxdy) at time t (B, m)."""
-    if sc.reference is None:
-        return np.zeros((np.size(t), sc.n_inputs))
-    return sc.reference(t)
+    ``backend="numba"``: the compiled closed loop (:func:`dobs_envs.rollout.rollout`);
+    ``"numpy"``: its reference, a Python loop over the numpy step
+    (:func:`dobs_envs.rollout.rollout_reference`, ``progress`` shows a bar).
+    """
+    if backend == "numba":
+        return rollout(sc, dt=dt, t_end=t_end)[0]
+    if backend == "numpy":
+        return rollout_reference(sc, dt=dt, t_end=t_end, backend="numpy", progress=progress)
+    raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
 
 
 def metrics(sc, traj: Trajectory, dt: float) -> dict:
@@ -118,8 +66,7 @@ def metrics(sc, traj: Trajectory, dt: float) -> dict:
     u_smooth = (np.array([np.convolve(u[:, j], np.ones(win) / win, mode="valid") for j in range(u.shape[1])]).T
                 if win > 1 else u)
     def window(y):
-        y = np.asarray(y, dtype=float)[last5:]
-        return {"rms": float(np.sqrt(np.mean(y ** 2))), "peak": float(np.max(y)), "end": float(y[-1])}
+        return window_stats(traj.t, y)
 
     open_loop = sc.controller == "open_loop"
     return {
@@ -226,17 +173,46 @@ def _positive_float(text: str) -> float:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("reproduce", help="reproduce the paper's numerical examples (figures + metrics.json)")
-    p.add_argument("scenario", choices=sorted(PAPER_SCENARIOS) + ["all"])
+    p.add_argument("scenario", choices=sorted(PAPER_SCENARIOS) + ["all"] + list(STUDIES),
+                   help="a paper example, 'all' of them, or a study: 'convergence' (errors vs Euler step, "
+                        "log-log slopes) or 'theorem6' (NE3 residual over epsilon x gain scale)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--t-end", type=_positive_float, default=None,
                    help="horizon in seconds (default: the scenario's: NE1 30 s, NE2/NE3 20 s)")
     p.add_argument("--dt", type=_positive_float, default=None, help="Euler step (default 1e-3)")
-    p.add_argument("--backend", choices=["numba", "numpy"], default="numba")
+    p.add_argument("--backend", choices=["numba", "numpy"], default="numba",
+                   help="numba: compiled closed loop; numpy: the reference Python loop (slow)")
+    p.add_argument("--workers", type=int, choices=[1, 2, 4, 8], default=2,
+                   help="processes running the cells of a study (default 2)")
     p.add_argument("--no-progress", action="store_true")
-    p.set_defaults(func=_run)
+    p.set_defaults(func=_run, parser=p)
+
+
+def _run_study(args) -> int:
+    from .studies import convergence_study, theorem6_study
+
+    for name, val in (("--t-end", args.t_end), ("--dt", args.dt)):
+        if val is not None:
+            args.parser.error(f"{name} does not apply to the {args.scenario} study (it chooses its own steps)")
+    if args.scenario == "convergence":
+        res = convergence_study(args.out, workers=args.workers)
+        for name, d in res["scenarios"].items():
+            sl = ", ".join(f"{k} {v:.2f}" for k, v in d["slopes"].items())
+            print(f"{name:5s} slopes of log(error) vs log(dt): {sl}")
+    else:
+        res = theorem6_study(args.out, workers=args.workers)
+        for variant in ("observer_based", "oracle"):
+            for c in res[variant] or ():
+                print(f"{variant:14s} eps={c['epsilon']:<5g} scale={c['gain_scale']:<4g} dt={c['dt']:.3g}"
+                      f"{'' if c['resolved'] else ' (unresolved)'}  peak ||x|| {c['peak_state_norm_last_5s']:.3g}"
+                      f"  peak est. err {c['peak_estimation_error_last_5s']:.3g}")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def _run(args) -> int:
+    if args.scenario in STUDIES:
+        return _run_study(args)
     names = list(PAPER_SCENARIOS) if args.scenario == "all" else [args.scenario]
     res = reproduce(names, args.out, t_end=args.t_end, dt=args.dt, backend=args.backend, progress=not args.no_progress)
     for name, met in res.items():

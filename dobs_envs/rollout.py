@@ -1,0 +1,248 @@
+"""Closed-loop runs of a scenario with its paper controller, batched and compiled.
+
+:func:`rollout` runs ``B`` copies of one scenario for ``t_end`` seconds with the paper's
+controller applied at every Euler step (control period = ``dt``: the continuous-time laws
+up to the O(dt) of the scheme), entirely in compiled code: per step the estimates
+``xhat_i = z_i + Gbar_i C_i x`` (eq. hatxieq), the control law
+(:func:`dobs_envs.control.kernel.law_copy`) and one Euler step of plant, observers,
+adaptive gains, reference model and exosystem (:func:`dobs_envs.sim.kernel.advance_rows`).
+Copies may differ in the controller's boundary layer ``epsilon`` and adaptation gain
+``phi_beta`` (eqs. hepsfunc, adlawbeta), which is what the Theorem 6 study sweeps.
+
+:func:`rollout_reference` is the readable reference: a Python loop over
+:func:`dobs_envs.sim.step_env` (numpy or numba step) and
+:meth:`SeparationController.act <dobs_envs.control.laws.SeparationController.act>`;
+the two are tested against each other (``tests/test_rollout.py``).
+
+Time-varying signals (reference command ``r(t)``, NE1's prescribed inputs) are evaluated
+once on the grid ``t_k = k dt`` before the loop.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .control import paper_policy
+from .control.kernel import law_arrays, law_copy
+from .sim import estimates, step_env
+from .sim.kernel import advance_rows, unpack_kernel_args
+
+__all__ = ["Trajectory", "rollout", "rollout_reference", "window_stats"]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Time series of one closed-loop run (one copy), sampled every ``record_every`` Euler steps.
+
+    t (T,), x (T, n), x_r (T, n) or None, est_err (T, N) = ||xhat_i - x||,
+    gamma/gamma_s (T, N), u (T, m) (input applied on [t_k, t_{k+1}); the last sample repeats
+    the one before), beta (T, Nc) or None.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    x_r: np.ndarray | None
+    est_err: np.ndarray
+    gamma: np.ndarray
+    gamma_s: np.ndarray
+    u: np.ndarray
+    beta: np.ndarray | None
+
+    @property
+    def tracking_error(self) -> np.ndarray:
+        """``||x - x_r||`` (or ``||x||`` for stabilisation), (T,)."""
+        e = self.x if self.x_r is None else self.x - self.x_r
+        return np.linalg.norm(e, axis=-1)
+
+
+def window_stats(t: np.ndarray, y: np.ndarray, seconds: float = 5.0) -> dict:
+    """``{"rms", "peak", "end"}`` of the samples ``y (T,)`` over the last ``seconds`` of ``t (T,)``."""
+    y = np.asarray(y, dtype=float)[int(np.searchsorted(t, max(0.0, float(t[-1]) - seconds))):]
+    return {"rms": float(np.sqrt(np.mean(y ** 2))), "peak": float(np.max(y)), "end": float(y[-1])}
+
+
+def _signal(sig, t: np.ndarray, m: int) -> np.ndarray:
+    """``sig(t)`` on the grid ``t (T,)`` -> (T, m) (zeros for ``None``)."""
+    return np.zeros((t.size, m)) if sig is None else np.ascontiguousarray(sig(t), dtype=float).reshape(t.size, m)
+
+
+def _per_copy(name, val, default, batch):
+    a = np.broadcast_to(np.asarray(default if val is None else val, dtype=float), (batch,)).copy()
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise ValueError(f"{name} must be positive and finite (scalar or one per copy), got {val!r}")
+    return a
+
+
+def _steps(sc, dt, t_end):
+    dt = float(sc.dt if dt is None else dt)
+    t_end = float(sc.t_end if t_end is None else t_end)
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be positive and finite, got {dt!r}")
+    if not (np.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"t_end must be positive and finite, got {t_end!r}")
+    return dt, t_end, max(1, int(round(t_end / dt)))
+
+
+@numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, code, oracle, row_link, K, BtP, starts, ends,
+                    eps, phi_beta, decay, gain, cmd, ref, steps, stride,
+                    rec_x, rec_xr, rec_ee, rec_g, rec_gs, rec_u, rec_beta):
+    ka = unpack_kernel_args(KF, KI)
+    C, G_bar = ka[3], ka[6]
+    Bsz, N, n = z.shape[0], z.shape[1], z.shape[2]
+    m = K.shape[0]
+    p = C.shape[1]
+    xhat = np.empty((N, n))
+    y = np.empty(p)
+    u = np.zeros((Bsz, m))
+    r = np.zeros((Bsz, m))
+    w = np.empty(m)
+    s = 0
+    for k in range(steps + 1):
+        rec = k % stride == 0
+        for b in range(Bsz):
+            xb = x[b]
+            # eq. (localmeasure) y_i = C_i x, eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
+            for i in range(N):
+                for q in range(p):
+                    acc = 0.0
+                    for c in range(n):
+                        acc += C[i, q, c] * xb[c]
+                    y[q] = acc
+                for c in range(n):
+                    acc = z[b, i, c]
+                    for q in range(p):
+                        acc += G_bar[i, c, q] * y[q]
+                    xhat[i, c] = acc
+            if rec:
+                rec_x[b, s] = xb
+                rec_xr[b, s] = x_r[b]
+                for i in range(N):
+                    e2 = 0.0
+                    for c in range(n):
+                        d = xhat[i, c] - xb[c]
+                        e2 += d * d
+                    rec_ee[b, s, i] = np.sqrt(e2)
+                rec_g[b, s] = gamma[b]
+                rec_gs[b, s] = gamma_s[b]
+                rec_beta[b, s] = beta[b]
+            if k < steps:
+                law_copy(code, xhat, xb, oracle, row_link, K, BtP, starts, ends, ref[k], cmd[k], beta[b], eps[b],
+                         phi_beta[b], decay, gain, u[b], w)
+                for j in range(m):
+                    r[b, j] = ref[k, j]
+            if rec:
+                rec_u[b, s] = u[b]  # the input applied from t_k on (at the last sample: the one before)
+        if rec:
+            s += 1
+        if k < steps:
+            advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, Bsz)
+
+
+def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: int = 1, epsilon=None,
+            phi_beta=None, oracle: bool = False, record_every: int = 1) -> list[Trajectory]:
+    """Compiled closed-loop runs of ``batch`` copies of scenario ``sc`` with its paper controller.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The system, its observer design, controller (``sc.controller``) and printed initial
+        conditions (every copy starts from them).
+    dt, t_end : float, optional
+        Euler step (= control period) and horizon (s); default the scenario's.
+    batch : int
+        Number of copies ``B``.
+    epsilon, phi_beta : float or array_like (B,), optional
+        Per-copy boundary layer and adaptation gain of the adaptive sliding-mode law (eqs.
+        hepsfunc, adlawbeta); default the scenario's. Ignored by the other laws.
+    oracle : bool
+        Apply the control law to the true state ``x`` instead of the linked estimates.
+    record_every : int
+        Record every ``record_every``-th Euler step (and the last one if it falls on the grid).
+
+    Returns
+    -------
+    list of Trajectory
+        One per copy, sampled at ``t = k * record_every * dt``.
+    """
+    dt, t_end, steps = _steps(sc, dt, t_end)
+    batch, stride = int(batch), int(record_every)
+    if batch < 1:
+        raise ValueError(f"batch must be >= 1, got {batch}")
+    if stride < 1:
+        raise ValueError(f"record_every must be >= 1, got {record_every}")
+    params = sc.sim_params(dt=dt, substeps=1)
+    state = sc.initial_state(params, batch=batch)
+    ctrl = paper_policy(sc)
+    n, N, m = params.n_states, params.n_nodes, params.n_inputs
+    code, row_link, K, BtP, starts, ends, beta0, sigma_b, phi_b, eps0 = law_arrays(ctrl, m, n)
+    eps = _per_copy("epsilon", epsilon, eps0, batch)
+    phib = _per_copy("phi_beta", phi_beta, phi_b if phi_b > 0 else 1.0, batch)
+    decay = float(np.exp(-sigma_b * dt))
+    gain = (1.0 - decay) / sigma_b if sigma_b > 0 else dt
+    t_grid = np.arange(steps) * dt
+    cmd = _signal(getattr(sc, "prescribed_input", None) if code == 0 else None, t_grid, m)
+    ref = _signal(sc.reference, t_grid, m)
+    Nc = starts.shape[0]
+    beta = np.full((batch, Nc), beta0)
+    R = steps // stride + 1
+    rec = dict(x=np.empty((batch, R, n)), x_r=np.empty((batch, R, n)), est_err=np.empty((batch, R, N)),
+               gamma=np.empty((batch, R, N)), gamma_s=np.empty((batch, R, N)), u=np.zeros((batch, R, m)),
+               beta=np.empty((batch, R, Nc)))
+    x, z, g, gs, v, xr = (np.array(a, dtype=float, order="C") for a in
+                          (state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r))
+    _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, code, bool(oracle), row_link, K, BtP,
+                    starts, ends, eps, phib, decay, gain, cmd, ref, steps, stride,
+                    rec["x"], rec["x_r"], rec["est_err"], rec["gamma"], rec["gamma_s"], rec["u"], rec["beta"])
+    if steps % stride == 0 and R > 1:
+        rec["u"][:, -1] = rec["u"][:, -2]
+    t = np.arange(R) * (dt * stride)
+    has_beta = code in (3, 4)
+    return [Trajectory(t=t, x=rec["x"][b], x_r=rec["x_r"][b] if sc.reference is not None else None,
+                       est_err=rec["est_err"][b], gamma=rec["gamma"][b], gamma_s=rec["gamma_s"][b], u=rec["u"][b],
+                       beta=rec["beta"][b] if has_beta else None) for b in range(batch)]
+
+
+def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None, oracle: bool = False,
+                      backend: str = "numpy", progress: bool = False) -> Trajectory:
+    """Reference implementation of :func:`rollout` (one copy, the scenario's own gains).
+
+    A Python loop: per Euler step :func:`~dobs_envs.sim.estimates`, the controller's ``act``
+    (numpy) and :func:`~dobs_envs.sim.step_env` with the given ``backend`` (``"numpy"``: the
+    reference step, ``"numba"``: the compiled step).
+    """
+    dt, t_end, steps = _steps(sc, dt, t_end)
+    params = sc.sim_params(dt=dt, substeps=1)
+    state = sc.initial_state(params)
+    ctrl = paper_policy(sc)
+    cstate = ctrl.initial_state(1)
+    n, N, m = params.n_states, params.n_nodes, params.n_inputs
+    has_beta = getattr(ctrl, "kind", None) in ("sliding_mode", "adaptive_sliding_mode")
+    T = steps + 1
+    xs = np.empty((T, n)); xrs = np.empty((T, n)); ee = np.empty((T, N))
+    gs = np.empty((T, N)); gss = np.empty((T, N)); us = np.zeros((T, m))
+    bs = np.empty((T, ctrl.n_controllers)) if has_beta else None
+    it = range(steps + 1)
+    if progress:
+        from tqdm.auto import tqdm
+        it = tqdm(it, desc=sc.name, unit="step", mininterval=0.5, leave=False)
+    for k in it:
+        xhat = estimates(state, params)
+        xs[k] = state.x[0]; xrs[k] = state.x_r[0]
+        ee[k] = np.linalg.norm(xhat[0] - state.x[0], axis=-1)
+        gs[k] = state.gamma[0]; gss[k] = state.gamma_s[0]
+        if has_beta:
+            bs[k] = cstate.beta[0]
+        if k == steps:
+            break
+        t = np.array([k * dt])
+        src = np.broadcast_to(state.x[:, None, :], xhat.shape) if oracle else xhat
+        u, cstate = ctrl.act(src, t, cstate, dt)
+        us[k] = u[0]
+        r = np.zeros((1, m)) if sc.reference is None else sc.reference(t)
+        state = step_env(state, u, params, r, backend=backend, validate=False)
+    us[-1] = us[-2] if T > 1 else us[-1]
+    return Trajectory(t=np.arange(T) * dt, x=xs, x_r=xrs if sc.reference is not None else None,
+                      est_err=ee, gamma=gs, gamma_s=gss, u=us, beta=bs)
