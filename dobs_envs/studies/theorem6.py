@@ -37,7 +37,7 @@ EPSILONS = (0.2, 0.1, 0.05, 0.02, 0.01)
 GAIN_SCALES = (1.0, 3.0, 10.0)
 PRINTED = (0.2, 1.0)
 DT0 = 1e-3
-DT_MIN = 1.25e-4
+DT_MIN = 3.125e-5
 RTOL = 0.05
 ATOL = 1e-4
 SAMPLE = 1e-3
@@ -129,7 +129,7 @@ def _grid(res, cells, key):
     E, S = res["epsilons"], res["gain_scales"]
     g = np.full((len(S), len(E)), np.nan)
     for c in cells:
-        g[S.index(c["gain_scale"]), E.index(c["epsilon"])] = c[key]
+        g[S.index(c["gain_scale"]), E.index(c["epsilon"])] = float(c[key])
     return g
 
 
@@ -147,10 +147,15 @@ def _plot(res: dict, path: str) -> None:
     f, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.6))
     for ax, (variant, key, title) in zip(np.atleast_1d(axes), panels):
         g = _grid(res, res[variant], key)
-        im = ax.imshow(np.log10(g), origin="lower", cmap="viridis", aspect="auto")
+        unresolved = _grid(res, res[variant], "resolved") == 0
+        lg = np.log10(g)
+        im = ax.imshow(lg, origin="lower", cmap="viridis", aspect="auto")
+        lo, hi = np.nanmin(lg), np.nanmax(lg)
         for i in range(len(S)):
             for j in range(len(E)):
-                ax.text(j, i, f"{g[i, j]:.2g}", ha="center", va="center", fontsize=7, color="w")
+                bright = hi > lo and (lg[i, j] - lo) / (hi - lo) > 0.6
+                ax.text(j, i, f"{g[i, j]:.2g}" + ("*" if unresolved[i, j] else ""), ha="center", va="center",
+                        fontsize=7, color="k" if bright else "w")
         if PRINTED[0] in E and PRINTED[1] in S:
             ax.add_patch(plt.Rectangle((E.index(PRINTED[0]) - 0.5, S.index(PRINTED[1]) - 0.5), 1, 1, fill=False,
                                        ec="red", lw=2))
@@ -160,7 +165,8 @@ def _plot(res: dict, path: str) -> None:
         ax.set_ylabel(r"gain scale ($\phi^k, \phi_i, \phi_{is}$)")
         ax.set_title(title, fontsize=9)
         f.colorbar(im, ax=ax, label="log10")
-    f.suptitle("NE3, Theorem 6 residual (red: printed setting)", fontsize=10)
+    f.suptitle("NE3, Theorem 6 residual (red: printed setting; *: dt_min reached before the 5 % criterion)",
+               fontsize=10)
     f.tight_layout()
     f.savefig(path, dpi=110)
     plt.close(f)
