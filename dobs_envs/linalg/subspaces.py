@@ -21,6 +21,7 @@ __all__ = [
     "DEFAULT_RTOL",
     "rank_tol",
     "numerical_rank",
+    "scaled_rank",
     "orth",
     "null_space",
     "left_null_space",
@@ -83,6 +84,20 @@ def numerical_rank(M: np.ndarray, tol: float | None = None) -> int:
         return 0
     s = np.linalg.svd(M, compute_uv=False)
     return int(np.sum(s > rank_tol(s, M.shape, tol)))
+
+
+def scaled_rank(M: np.ndarray, tol: float | None = None) -> int:
+    """Rank of ``M / ||M||_2`` (:func:`numerical_rank` of the normalised matrix): the
+    decision does not depend on the units of ``M``. The scaling goes through
+    ``max |M_ij|`` first, so entries near the overflow threshold are harmless."""
+    M = np.atleast_2d(np.asarray(M, dtype=float))
+    if M.size == 0:
+        return 0
+    mx = float(np.max(np.abs(M)))
+    if mx == 0.0:
+        return 0
+    Ms = M / mx
+    return numerical_rank(Ms / np.linalg.norm(Ms, 2), tol)
 
 
 def orth(M: np.ndarray, tol: float | None = None) -> np.ndarray:
