@@ -384,7 +384,15 @@ def strong_detectability(
     ------
     ValueError
         Non-2-D, non-finite or mismatched arguments; ``C`` without full row
-        rank.
+        rank; a ``margin`` so large next to ``||A||`` (subnormal ``A``) that
+        ``margin / ||A||`` or the gains overflow double precision.
+    IllConditionedError
+        (a ``ValueError``) The data are too badly scaled, or too close to a
+        rank or stability boundary, for a reliable result in double
+        precision, even after balancing; the message says which check failed
+        (e.g. residuals of the defining equations above ``1e-7`` on the
+        caller's data, no stabilising ``J_2``). Never an internal
+        ``RuntimeError``.
 
     Notes
     -----
@@ -450,6 +458,38 @@ def strong_detectability(
        to ``||Pi_3||``: a large invariant zero (e.g. ``-96`` after
        normalisation when ``C B`` is small) made such a radius lump the
        remaining zeros, stable and unstable, into one "stable" cluster.
+    4. Scaling (issue 12). Exact powers of two first: ``A`` to entries below
+       1, every column of ``B_unknown`` and every row of ``C`` likewise (the
+       unknown inputs and the outputs have arbitrary units). Then a diagonal
+       state-coordinate balancing ``x = D x_b``, ``D = diag(2^k)``, of the
+       system matrix ``[[A, B], [C, 0]]`` (:func:`_balancing_exponents`,
+       LAPACK ``dgebal``'s scaling loop, with a dead band so ordinarily scaled
+       systems are left exactly as given); the result is mapped back with
+       ``T_id^T = R^{-T} T_b^T D^{-1}`` (QR of ``D^{-1} T_b``), ``E = R^{-T}
+       E_b R^T``, ``F = R^{-T} F_b``, ``G = R^{-T} G_b``. If that result
+       fails the checks, the unbalanced data are tried (a smaller subspace
+       from them is refused: it would not be maximal). Steps 6-8 run in the
+       time unit ``max(||A||, margin)``: the ARE shift and the ``E``-block of
+       the rows of ``C`` are then at most 1 however slow ``A`` is (before,
+       ``A * 1e-20`` gave a shift of ``2e19`` and the ARE failed); only the
+       derivative columns of the known-term matrices change. The result is
+       re-checked on the caller's data (:func:`lemma2_residuals` <= 1e-7,
+       ``T_d^T = G C`` in the ``E = 0`` branch, ``Re lambda(E) < 0``).
+    5. Cost ``O(n^3)``. Step 6 computes the unobservable subspace of
+       ``(Pi_3, Pi_4)`` with one observability staircase
+       (:func:`~dobs_envs.linalg.subspaces.observability_staircase`:
+       Householder reflections and SVDs of the small triangular factors,
+       ranks decided on singular values against one explicit threshold,
+       ``DEFAULT_RTOL * max(1, ||[Pi_4; Pi_3]||_2)`` by default), and the
+       Wonham split ``P_d = [W_o, V_o Z_s]`` (``Z_s``: ordered Schur vectors
+       of the stable unobservable modes) already separates the observable
+       part ``(A_o, C_o)`` from the fixed modes of the detectable pair, so
+       ``J_2`` needs no second unobservable-subspace computation. (Before:
+       ``ker [Pi_4; V_k^perp Pi_3]`` by a full SVD at each of up to ``r + 1``
+       steps, twice: ``O(n^4)``.) ``J_2``: the shifted ARE on ``(A_o, C_o)``;
+       if it has no finite stabilising solution (many modes, few relations),
+       the ARE on the modes with ``Re >= -margin`` only
+       (:func:`_stabilising_injection`).
     """
     A0, B0, C0 = _validate(A, B_unknown, C)
     n = A0.shape[0]
