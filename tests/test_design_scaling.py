@@ -240,7 +240,9 @@ def test_design_keeps_the_error_class_and_names_the_node():
 
 
 # ---------------------------------------------------------------------------
-# fuzz (CI budget: see README of the issue report; deterministic)
+# fuzz: deterministic (derandomize), FUZZ_EXAMPLES systems of n <= 5 states and
+# FUZZ_EXAMPLES / 2 networks of n <= 4 states and N <= 3 nodes; measured ~20-35 s
+# and ~6-8 s on the shared 2-core machine
 # ---------------------------------------------------------------------------
 @st.composite
 def entries(draw, shape):
@@ -248,7 +250,7 @@ def entries(draw, shape):
     density = draw(st.sampled_from([0.3, 0.6, 1.0]))
     size = int(np.prod(shape))
     if kind == "special":
-        el = st.sampled_from(SPECIAL).map(lambda v: v)
+        el = st.sampled_from(SPECIAL)
         signs = draw(st.lists(st.sampled_from([1.0, -1.0]), min_size=size, max_size=size))
     elif kind == "any":
         el = st.floats(allow_nan=False, allow_infinity=False, width=64)
