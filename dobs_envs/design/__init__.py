@@ -7,9 +7,12 @@ Public API
 - :func:`shifted_are_feedback` (NE2), :func:`lyapunov_P` (NE3), :func:`observer_are_gain` (NE1).
 - :class:`ObserverDesign`, :func:`design_distributed_observer` (eq. barEFGB/TidTiu),
   :func:`design_mas_observer` (eq. obidynamicMAS), :func:`observer_residuals`.
+- :class:`IllConditionedError` -- a ``ValueError``: the data are too badly scaled or too close
+  to a rank/stability boundary for a reliable design in double precision (message says why).
 """
 from .gains import lyapunov_P, observer_are_gain, shifted_are_feedback, split_gain
 from .geometric import reconstructible_subspace
+from ..linalg.subspaces import IllConditionedError
 from .lemma2 import StrongDetectability, strong_detectability
 from .observer import (
     ObserverDesign,
@@ -19,6 +22,7 @@ from .observer import (
 )
 
 __all__ = [
+    "IllConditionedError",
     "StrongDetectability",
     "strong_detectability",
     "reconstructible_subspace",

@@ -36,7 +36,7 @@ from threadpoolctl import threadpool_limits
 
 from .. import assumptions as _asm
 from ..graphs import Graph, as_graph
-from ..linalg.subspaces import is_hurwitz, numerical_rank
+from ..linalg.subspaces import IllConditionedError, is_hurwitz, scaled_rank
 from ..linalg.validation import as_matrix, as_square
 from .gains import observer_are_gain
 from .lemma2 import StrongDetectability, lemma2_residuals, strong_detectability
@@ -194,7 +194,7 @@ def observer_residuals(design: ObserverDesign) -> np.ndarray:
 def _check_full_row_rank(C: np.ndarray, name: str) -> None:
     if C.shape[0] == 0:
         raise ValueError(f"{name} has no rows: every observer node needs a measurement y_i = C_i x")
-    r = numerical_rank(C)
+    r = scaled_rank(C)  # the rule strong_detectability applies (units of C do not matter)
     if r < C.shape[0]:
         raise ValueError(
             f"{name} must have full row rank (eq. localmeasure), got shape {C.shape} with "
@@ -258,21 +258,29 @@ def _assemble(A, B, slices, B_v, C_list, known_mask, g, T_d, T_u, E, F, G, lemma
     B_bar = np.zeros((N, n, m))
     P_u = np.empty((N, n, n))
     P_d = np.empty((N, n, n))
-    for i in range(N):
-        Ci, Td, Tu = C_list[i], T_d[i], T_u[i]
-        pi = Ci.shape[0]
-        C[i, :pi] = Ci
-        P_d[i] = Td @ Td.T
-        P_u[i] = Tu @ Tu.T  # eq. (TidTiu): = I - T_id T_id^T
-        PuA = A - Td @ (Td.T @ A)  # T_iu T_iu^T A without forming P_u @ A (O(n^2 delta))
-        Gb = Td @ G[i]  # eq. (barG_i)
-        E_bar[i] = (Td @ E[i]) @ Td.T + PuA  # eq. (barE_i)
-        F_bar[i, :, :pi] = Td @ F[i] + PuA @ Gb  # eq. (barF_i)
-        G_bar[i, :, :pi] = Gb
-        cols = known_mask[i]
-        if cols.any():
-            B_bar[i][:, cols] = (I - Gb @ Ci) @ B[:, cols]  # eq. (barB_i)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is checked below
+        for i in range(N):
+            Ci, Td, Tu = C_list[i], T_d[i], T_u[i]
+            pi = Ci.shape[0]
+            C[i, :pi] = Ci
+            P_d[i] = Td @ Td.T
+            P_u[i] = Tu @ Tu.T  # eq. (TidTiu): = I - T_id T_id^T
+            PuA = A - Td @ (Td.T @ A)  # T_iu T_iu^T A without forming P_u @ A (O(n^2 delta))
+            Gb = Td @ G[i]  # eq. (barG_i)
+            E_bar[i] = (Td @ E[i]) @ Td.T + PuA  # eq. (barE_i)
+            F_bar[i, :, :pi] = Td @ F[i] + PuA @ Gb  # eq. (barF_i)
+            G_bar[i, :, :pi] = Gb
+            cols = known_mask[i]
+            if cols.any():
+                B_bar[i][:, cols] = (I - Gb @ Ci) @ B[:, cols]  # eq. (barB_i)
     del I
+    for name, M in (("E_bar", E_bar), ("F_bar", F_bar), ("G_bar", G_bar), ("B_bar", B_bar)):
+        bad = ~np.all(np.isfinite(M.reshape(N, -1)), axis=1)
+        if bad.any():
+            raise ValueError(
+                f"{name} of node {int(np.argmax(bad))} overflows double precision (eq. barEFGB): "
+                "A, the input channels or C_i are too large for this design; rescale them"
+            )
     return ObserverDesign(
         A=_ro(A), B=_ro(B), channel_slices=tuple(slices), B_v=_ro(B_v), C=_ro(C), p_i=_ro(p_i),
         known=_ro(known_mask), E_bar=_ro(E_bar), F_bar=_ro(F_bar), G_bar=_ro(G_bar),
@@ -326,6 +334,9 @@ def design_distributed_observer(
     ------
     ValueError
         Malformed arguments (message names the argument, node and expected shape).
+    IllConditionedError
+        A node's Lemma 2 design cannot be computed reliably in double
+        precision (a ``ValueError``; the message names the node and why).
     GraphNotConnectedError
         Assumption 5 fails.
     CollectiveDetectabilityError
@@ -378,7 +389,8 @@ def design_distributed_observer(
             try:
                 results.append(strong_detectability(A, B_minus, C_list[i], tol=tol))
             except ValueError as exc:
-                raise ValueError(f"node {i}: Lemma 2 (strong_detectability) failed: {exc}") from exc
+                cls = IllConditionedError if isinstance(exc, IllConditionedError) else ValueError
+                raise cls(f"node {i}: Lemma 2 (strong_detectability) failed: {exc}") from exc
 
     T_d = [r.T_d for r in results]
     _asm.check_collective_detectability(T_d, n, tol=tol)  # Assumption 6
