@@ -210,7 +210,7 @@ def test_termination_on_state_bound():
         if term["controller_0"]:
             break
     assert term["controller_0"] and not trunc["controller_0"] and env.agents == []
-    assert info["controller_0"]["termination_reason"] == "state_bound_exceeded"
+    assert info["controller_0"]["termination_reason"] == 1  # REASONS[1] == "state_bound_exceeded"
     assert np.linalg.norm(env.sim_state.x[0]) > 15.0
     with pytest.raises(RuntimeError, match="reset"):
         env.step(hi)

@@ -19,7 +19,6 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .core import REASONS
 from .distributions import DEFAULT_INIT_NOISE
 from .options import EnvOptions
 from .spec import EnvSpec
@@ -128,7 +127,7 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                 self._obs_spaces[a].seed(int(seed) + k)
         self.core.reset(None, None if seed is None else [seed], options)
         self.agents = list(self.possible_agents)
-        return self._observations(), self._infos(None)
+        return self._observations(), self._infos(0)
 
     def step(self, actions: dict):
         if not self.agents:
@@ -145,10 +144,9 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
             self._parse_actions(actions, u)
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
-        reason = REASONS[int(res.reason[0])] if term or trunc else None
         agents = self.possible_agents
         out = (self._observations(), dict.fromkeys(agents, float(res.reward[0])), dict.fromkeys(agents, term),
-               dict.fromkeys(agents, trunc), self._infos(reason))
+               dict.fromkeys(agents, trunc), self._infos(int(res.reason[0])))
         if term or trunc:
             self.agents = []
         return out
@@ -177,15 +175,14 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         o = self.core.observations[0].copy()
         return {a: o[k, :w] for k, (a, w) in enumerate(zip(self.possible_agents, self._obs_w))}
 
-    def _infos(self, reason) -> dict:
+    def _infos(self, reason: int) -> dict:
+        """Per-agent infos: the same numeric keys from ``reset`` on (see :data:`INFO_KEYS`)."""
         c = self.core
         ee, te = c.estimation_errors[0].tolist(), float(c.tracking_errors[0])
         g, gs = c.gamma[0].tolist(), c.gamma_s[0].tolist()
-        extra = {}
+        extra = {"termination_reason": reason}
         if c.task_error_key is not None:
-            extra[c.task_error_key] = float(c.task_errors()[0])
-        if reason is not None:
-            extra["termination_reason"] = reason
+            extra = {c.task_error_key: float(c.task_errors()[0]), **extra}
         return {a: {"estimation_error": ee[i], "tracking_error": te, "gamma": g[i], "gamma_s": gs[i], **extra}
                 for a, i in zip(self.possible_agents, c.links)}
 

@@ -14,9 +14,12 @@ dict round trip); the parallel env's diagnostics (``state()``, ``estimation_erro
   (``env.agent_action_slices[k]`` is channel ``k``); out-of-range values are
   clipped, NaN/inf or a wrong shape raise ``ValueError`` (naming the agent
   whose channel holds the NaN);
-- reward: the team reward; ``terminated`` as the parallel env; info:
-  ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,), ``gamma_s`` (N,),
-  and ``termination_reason`` when the episode terminated.
+- reward: the team reward; ``terminated`` as the parallel env; info (the same keys from
+  ``reset`` on, numeric only): ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,),
+  ``gamma_s`` (N,), the task error if the task has one (e.g. ``disagreement``) and the integer
+  ``termination_reason`` (codes of :data:`~dobs_envs.envs.core.REASONS`: 0 none,
+  1 state_bound_exceeded, 2 non_finite_state, 3 horizon; ``gym.make``'s ``TimeLimit``
+  truncates with code 0).
 
 Registered ids (one per entry of :mod:`dobs_envs.registry`; ``gym.make`` adds a
 ``TimeLimit`` of ``max_episode_steps`` control steps, the default scenario's
@@ -48,7 +51,6 @@ from gymnasium import spaces
 
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 from .base import DObsParallelEnv
-from .core import REASONS
 
 __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "reject_horizon_options"] + [f"make_{name}" for name in ENVIRONMENTS]
 
@@ -100,7 +102,7 @@ class CentralizedEnv(gym.Env):
         if seed is not None:
             self.action_space.seed(int(seed))
         self.core.reset(None, None, options)
-        return self._obs(), self._info()
+        return self._obs(), self._info(0)
 
     def step(self, action):
         if not self.core.started:
@@ -114,21 +116,19 @@ class CentralizedEnv(gym.Env):
         self._u[0] = a
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
-        info = self._info()
-        if term:
-            info["termination_reason"] = REASONS[int(res.reason[0])]
-        return self._obs(), float(res.reward[0]), term, trunc, info
+        return self._obs(), float(res.reward[0]), term, trunc, self._info(int(res.reason[0]))
 
     def _obs(self) -> np.ndarray:
         flat = self.core.observations[0].reshape(-1)
         return flat.copy() if self.core.layout.uniform else flat[self._cat]  # a new array
 
-    def _info(self) -> dict:
+    def _info(self, reason: int) -> dict:
         c = self.core
         info = {"tracking_error": float(c.tracking_errors[0]), "estimation_errors": c.estimation_errors[0].copy(),
                 "gamma": c.gamma[0].copy(), "gamma_s": c.gamma_s[0].copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = float(c.task_errors()[0])
+        info["termination_reason"] = reason
         return info
 
     def render(self):

@@ -24,12 +24,15 @@ nodes, ``m`` inputs, ``D`` the widest agent observation.
 ``sim_state`` / ``set_sim_state``   snapshot of / overwrite the simulation state
 =================================  ==========================================================
 
-Reason codes (``StepResult.reason``, int8; :data:`REASONS` maps them to the info strings):
+Reason codes (``StepResult.reason``, int8; :data:`REASONS` maps them to their names). Every
+adapter reports the code as the integer info ``termination_reason``, present from ``reset`` on
+(0 there and on every step that does not end the episode):
 
 ====  ========================  ============================================================
 code  name                      meaning
 ====  ========================  ============================================================
-0     ``None``                  the episode goes on
+0     ``none``                  the episode goes on (or was cut by an outer time limit,
+                                e.g. ``gym.make``'s ``TimeLimit``)
 1     ``state_bound_exceeded``  terminated: ``||x|| > state_bound``
 2     ``non_finite_state``      terminated: some entry of x, x_r, z, gamma, gamma_s, v is NaN/inf
 3     ``horizon``               truncated: ``max_cycles`` control steps
@@ -64,8 +67,8 @@ REWARD_CODES = {"quadratic": 0, "log": 1, "sqrt": 2}
 
 __all__ = ["EnvCore", "StepResult", "REASONS", "load_scenario"]
 
-#: reason code -> ``info["termination_reason"]`` string (None: not ended)
-REASONS = {REASON_NONE: None, REASON_STATE_BOUND: "state_bound_exceeded", REASON_NON_FINITE: "non_finite_state",
+#: reason code (the integer ``info["termination_reason"]`` of every adapter) -> name
+REASONS = {REASON_NONE: "none", REASON_STATE_BOUND: "state_bound_exceeded", REASON_NON_FINITE: "non_finite_state",
            REASON_HORIZON: "horizon"}
 
 

@@ -82,7 +82,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
+    finite (as ``tracking_v0``: ``termination_reason`` 2, cleaned terminal
     observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
@@ -92,7 +92,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ## Info
 
     Per agent: ``estimation_error`` of its node, ``tracking_error`` (= ``||x||``),
-    ``gamma``, ``gamma_s`` of its node.
+    ``gamma``, ``gamma_s`` of its node, ``termination_reason`` (integer code, as ``tracking_v0``).
 
     ## Arguments
 

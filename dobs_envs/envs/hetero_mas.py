@@ -71,7 +71,7 @@ class HeteroMASEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
+    finite (as ``tracking_v0``: ``termination_reason`` 2, cleaned terminal
     observations); truncated after ``max_cycles``
     (default 600 control steps = NE1's 30 s).
     On termination the reward of that step also charges the cost of staying on the
@@ -83,7 +83,8 @@ class HeteroMASEnv(DObsParallelEnv):
 
     Per agent: ``estimation_error`` of its node, ``tracking_error`` (``||x||``),
     ``disagreement`` (``||p - pbar 1||``, the rendezvous error, also plotted by
-    ``render()``), ``gamma``, ``gamma_s``.
+    ``render()``), ``gamma``, ``gamma_s``, ``termination_reason`` (integer code, as
+    ``tracking_v0``).
 
     ## Arguments
 

@@ -75,8 +75,9 @@ class RandomNetworkEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
-    observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
+    finite (as ``tracking_v0``: ``termination_reason`` 2 ``non_finite_state``, cleaned
+    terminal observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
+    Infos as ``tracking_v0`` (numeric, the same keys from ``reset`` on).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
     remaining control step (``termination_penalty=False`` disables it), so ending an

@@ -82,8 +82,8 @@ class TrackingEnv(DObsParallelEnv):
 
     Terminated when ``||x|| > state_bound`` (1e3) or any simulated quantity
     (``x``, ``x_r``, the observer states ``z``, ``gamma``, ``gamma_s``, ``v``) is
-    not finite (``info[agent]["termination_reason"]`` = ``"state_bound_exceeded"`` /
-    ``"non_finite_state"``). The terminal step's observations and ``state()`` are
+    not finite (``info[agent]["termination_reason"]`` = 1 ``state_bound_exceeded`` /
+    2 ``non_finite_state``). The terminal step's observations and ``state()`` are
     cleaned (NaN -> 0, +-inf -> +-largest finite value of ``obs_dtype``), a non-finite
     step cost is replaced by the cost of one step on the bound, and ``info`` keeps the
     raw diagnostics (errors and gains may be NaN/inf).
@@ -96,8 +96,11 @@ class TrackingEnv(DObsParallelEnv):
 
     ## Info
 
-    Per agent: ``estimation_error`` ``||xhat_i - x||`` of its linked node,
-    ``tracking_error`` ``||x - x_r||``, and that node's ``gamma``, ``gamma_s``.
+    Per agent, the same numeric keys from ``reset`` on: ``estimation_error``
+    ``||xhat_i - x||`` of its linked node, ``tracking_error`` ``||x - x_r||``, that node's
+    ``gamma``, ``gamma_s``, and the integer ``termination_reason``: 0 none (the episode goes
+    on), 1 state_bound_exceeded, 2 non_finite_state, 3 horizon (truncated after
+    ``max_cycles``) (:data:`dobs_envs.envs.core.REASONS`).
 
     ## Arguments
 

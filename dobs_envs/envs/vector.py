@@ -17,10 +17,12 @@ observations, rewards and episodes for the same seed (tested bit for bit).
 - **Seeding**: ``reset(seed=s)`` seeds copy ``c`` with ``s + c`` (a list seeds each copy);
   autoresets draw from the copy's own generator, so seeded runs are reproducible.
   ``reset(options={"reset_mask": mask})`` resets only the masked copies.
-- **Infos** (arrays over the copies, each with its ``"_<key>"`` mask): ``tracking_error (B,)``,
-  ``estimation_errors (B, N)``, ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g.
-  ``disagreement``), and ``termination_reason (B,)`` int8 codes of
-  :data:`~dobs_envs.envs.core.REASONS` (mask: the copies that ended).
+- **Infos** (the same keys from ``reset`` on, numeric arrays over the copies, each with its
+  ``"_<key>"`` mask, all True): ``tracking_error (B,)``, ``estimation_errors (B, N)``,
+  ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g. ``disagreement``), and
+  ``termination_reason (B,)`` int8 codes of :data:`~dobs_envs.envs.core.REASONS` (0 none,
+  1 state_bound_exceeded, 2 non_finite_state, 3 horizon; 0 for copies still running or
+  just reset).
 - ``threads`` (default: one per CPU core) advance disjoint ranges of at least 128 copies
   concurrently (the compiled step releases the GIL; same results for any number of threads).
 """
@@ -86,7 +88,7 @@ class DObsVectorEnv(VectorEnv):
             seeds = [seeds[r] for r in rows]
         self.core.reset(rows, seeds, options)
         self._autoreset[rows] = False
-        return self._obs(), self._infos(None)
+        return self._obs(), self._infos(np.zeros(B, dtype=np.int8))
 
     def step(self, actions):
         a = np.asarray(actions, dtype=np.float64)
@@ -115,11 +117,9 @@ class DObsVectorEnv(VectorEnv):
                 "gamma": c.gamma.copy(), "gamma_s": c.gamma_s.copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = np.array(c.task_errors(), dtype=np.float64)
+        info["termination_reason"] = reason
         for k in list(info):
             info[f"_{k}"] = np.ones(B, dtype=bool)
-        if reason is not None:
-            info["termination_reason"] = reason
-            info["_termination_reason"] = reason != 0
         return info
 
     def render(self):
