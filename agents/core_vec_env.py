@@ -41,6 +41,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from dobs_envs.envs.base import agent_spaces
 from dobs_envs.envs.centralized import central_spaces
 
 from .vec_env import SlotEncoder
@@ -68,17 +69,18 @@ class CoreVecEnv(VecEnv):
         self.n_copies = B = c.num_envs
         self.agents = list(c.agents)
         self.n_agents = K = c.n_agents if self.shared else 1
-        b = np.asarray(c.action_bound, dtype=np.float64)
-        self._lo, self._hi = -b, b
         self.rescale_actions = bool(rescale_actions)
         central_obs, central_act, _ = central_spaces(c)
+        # the env's own action units per input (the bounds, or [-1, 1] with the option normalized_actions);
+        # core.action_scale maps them to inputs
+        b = np.ones(c.n_inputs) if c.normalized_actions else np.asarray(c.action_bound, dtype=np.float64)
+        self._lo, self._hi = -b, b
         self.env_action_space = central_act  # the inputs' own bounds (evaluation undoes the rescaling with them)
         if self.shared:
-            bounds = [c.observation_bounds(k) for k in range(c.n_agents)]
-            self.encoder = SlotEncoder(
-                self.agents, {a: spaces.Box(*bd, dtype=c.obs_dtype) for a, bd in zip(self.agents, bounds)},
-                {a: spaces.Box(-b[s].astype(np.float32), b[s].astype(np.float32), dtype=np.float32)
-                 for a, s in zip(self.agents, c.channel_slices)}, agent_id=agent_id, rescale_actions=rescale_actions)
+            obs_spaces, act_spaces = agent_spaces(c)  # the PettingZoo env's spaces
+            self.encoder = SlotEncoder(self.agents, dict(zip(self.agents, obs_spaces)),
+                                       dict(zip(self.agents, act_spaces)), agent_id=agent_id,
+                                       rescale_actions=rescale_actions)
             obs_space, act_space = self.encoder.observation_space, self.encoder.action_space
             A = self.encoder.act_dim
             # input component j <- slot action (agent k_j, component j - start_k) in the (K * A) row of a copy
@@ -112,6 +114,8 @@ class CoreVecEnv(VecEnv):
             a = self._lo + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (self._hi - self._lo)
         if self.shared:  # as SlotEncoder.decode: clipped to the agent's box, in its float32 dtype
             a = np.clip(a, self._lo, self._hi).astype(np.float32).astype(np.float64)
+        if self.core.normalized_actions:
+            a = a * self.core.action_scale
         return a
 
     def slot_info(self, slot: int) -> tuple[int, str]:

@@ -13,7 +13,10 @@ dict round trip); the parallel env's diagnostics (``state()``, ``estimation_erro
   ``Box(-b, b, (m,), float32)`` with the parallel env's bounds
   (``env.agent_action_slices[k]`` is channel ``k``); out-of-range values are
   clipped, NaN/inf or a wrong shape raise ``ValueError`` (naming the agent
-  whose channel holds the NaN);
+  whose channel holds the NaN); with ``normalized_actions=True`` the action is
+  ``Box(-1, 1, (m,))`` and input ``j`` is ``a_j * b_j`` (no padding: one agent);
+- ``padded_observations=True``: each agent's part is its padded observation and mask
+  (as in the parallel env), so ``agent_observation_slices`` stay the agents' observations;
 - reward: the team reward; ``terminated`` as the parallel env; info (the same keys from
   ``reset`` on, numeric only): ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,),
   ``gamma_s`` (N,), the task error if the task has one (e.g. ``disagreement``) and the integer
@@ -57,7 +60,9 @@ __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "rejec
 
 def central_spaces(core):
     """``(observation Box, action Box, agent observation slices)`` of the centralised view of ``core``:
-    the agents' observations concatenated in agent order, all inputs stacked."""
+    the agents' observations concatenated in agent order (``padded_observations``: each padded and
+    masked), all inputs stacked (``normalized_actions``: ``Box(-1, 1, (m,))``, input ``j`` scaled
+    by its bound, ``core.action_scale``)."""
     lows, highs, sl, pos = [], [], [], 0
     for k, w in enumerate(core.obs_widths):
         lo, hi = core.observation_bounds(k)
@@ -65,7 +70,7 @@ def central_spaces(core):
         highs.append(hi)
         sl.append(slice(pos, pos + int(w)))
         pos += int(w)
-    b = core.action_bound.astype(np.float32)
+    b = np.ones(core.n_inputs, np.float32) if core.normalized_actions else core.action_bound.astype(np.float32)
     return (spaces.Box(np.concatenate(lows), np.concatenate(highs), dtype=core.obs_dtype),
             spaces.Box(-b, b, dtype=np.float32), tuple(sl))
 
@@ -113,7 +118,7 @@ class CentralizedEnv(gym.Env):
             raise ValueError(f"action must be a numeric array of shape ({self._u.shape[1]},), got {action!r}") from None
         if a.shape != self._u.shape[1:]:
             raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
-        self._u[0] = a
+        np.multiply(a, self.core.action_scale, out=self._u[0])
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
         return self._obs(), float(res.reward[0]), term, trunc, self._info(int(res.reason[0]))

@@ -13,7 +13,11 @@ nodes, ``m`` inputs, ``D`` the widest agent observation.
 ``reset(indices, seeds, options)``  reset all copies or a subset, per-copy seeds and options
 ``advance(u)``                      one control step of every copy; ``u (B, m)``; returns
                                     :class:`StepResult` ``(reward, terminated, truncated, reason)``
-``observations``                    ``(B, K, D)`` padded observations (``obs_widths[k]`` true widths)
+``observations``                    ``(B, K, D)`` padded observations (``obs_widths[k]`` true widths;
+                                    ``padded_observations``: every agent ``D`` wide, mask included)
+``agent_inputs(a)``                 the agents' actions concatenated ``(B, sum(agent_action_widths))``
+                                    -> inputs ``(B, m)`` (``normalized_actions``: gathered from the
+                                    padded actions and scaled by ``action_scale``)
 ``estimation_errors``               ``(B, N)`` ``||xhat_i - x||``
 ``tracking_errors``                 ``(B,)`` ``||x - x_r||`` (or ``||x||``)
 ``task_errors()``                   ``(B,)`` the task's error (tracking error, or e.g. the
@@ -194,12 +198,26 @@ class EnvCore:
             raise ValueError(f"action_bound must be a positive finite scalar or have shape ({m},) (one per input "
                              f"component), got {o.action_bound!r}")
         self.action_bound = _ro(bound)
+        #: option normalized_actions: agents act in [-1, 1]^M (M = max channel width, extra entries ignored)
+        self.normalized_actions = o.normalized_actions
+        M = int(self.action_widths.max())
+        #: width of each agent's action (normalized_actions: the common width M)
+        self.agent_action_widths = _ro(np.full(self.n_agents, M, dtype=np.intp) if o.normalized_actions
+                                       else self.action_widths.copy())
+        starts = np.concatenate([[0], np.cumsum(self.agent_action_widths)[:-1]])
+        #: (m,) position of input j in the agents' actions concatenated (agent-major)
+        self.action_gather = _ro(np.concatenate([starts[k] + np.arange(s.stop - s.start)
+                                                 for k, s in enumerate(self.channel_slices)]).astype(np.intp))
+        #: (m,) action unit -> input: the bound (normalized_actions) or 1
+        self.action_scale = _ro(bound.copy() if o.normalized_actions else np.ones(m))
         # --- observations -------------------------------------------------------------------
         self.obs_dtype = np.dtype(o.obs_dtype)
         comps = resolve_components(o.observation, has_reference=self.has_reference, has_unknown_input=m_v > 0)
         p_i = [c.shape[0] for c in sc.C]
+        #: option padded_observations: every agent observes its padded observation and a 0/1 mask
+        self.padded_observations = o.padded_observations
         self.layout = L = FeatureLayout(p_i, n, m, m_v, [sc.graph.neighbors(i) for i in range(N)], self.links,
-                                        self.channel_slices, comps)
+                                        self.channel_slices, comps, padded=o.padded_observations)
         self.obs_widths, self.obs_dim = _ro(L.widths), L.obs_dim
         self._state_index, self.state_layout = L.state_index(self.has_reference)
         self.state_dim = int(self._state_index.size)
@@ -288,6 +306,18 @@ class EnvCore:
             raise ValueError(f"max_cycles must be None or a positive integer, got {value!r}")
         self._max_cycles = None if value is None else int(value)
         self._consts = self._consts[:7] + (-1 if value is None else int(value),) + self._consts[8:]
+
+    def agent_inputs(self, actions, out: np.ndarray | None = None) -> np.ndarray:
+        """Inputs ``u (B, m)`` (for :meth:`advance`) from the agents' actions concatenated in agent
+        order, ``(B, sum(agent_action_widths))``: with ``normalized_actions`` each agent's first
+        ``m_k`` entries scaled by their bounds (the rest ignored), else the actions themselves."""
+        a = np.asarray(actions, dtype=np.float64)
+        if not self.normalized_actions:
+            if out is None:
+                return a
+            out[...] = a
+            return out
+        return np.multiply(a[..., self.action_gather], self.action_scale, out=out)
 
     def observation_bounds(self, k: int):
         """``(low, high)`` of agent ``k``'s observation (true width ``obs_widths[k]``)."""

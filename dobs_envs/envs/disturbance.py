@@ -100,7 +100,8 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
     R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0)`` (:class:`~dobs_envs.envs.options.EnvOptions`; see
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False)``
+    (:class:`~dobs_envs.envs.options.EnvOptions`; see
     ``tracking_v0`` for the shared ones). ``scenario=`` accepts any Scenario with an unknown
     input ``B_v``.
 

@@ -92,11 +92,13 @@ class HeteroMASEnv(DObsParallelEnv):
     horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
     action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0, q_rest=0.1, r=1.0, rho=1e-3)``
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False, q_rest=0.1,
+    r=1.0, rho=1e-3)``
     (:class:`~dobs_envs.envs.options.HeteroMASOptions`; the disturbance options do not
     apply: NE1 has no unknown input); ``q_rest``, ``r``, ``rho`` parametrise the task
     (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
-    takes any multi-agent Scenario (``mas_agents``).
+    takes any multi-agent Scenario (``mas_agents``). ``normalized_actions`` /
+    ``padded_observations``: identical agent spaces for parameter sharing (see ``tracking_v0``).
 
     ## Version History
 

@@ -89,11 +89,15 @@ class RandomNetworkEnv(DObsParallelEnv):
     observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
     init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic",
     cost_scale=0.1, render_mode=None, disturbance="exosystem", disturbance_amplitude=2.0,
-    kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
+    normalized_actions=False, padded_observations=False, kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
     graph="random", edge_prob=0.3, unknown_input=False, controller=None,
     generator_kwargs=None)`` (:class:`~dobs_envs.envs.options.RandomNetworkOptions`;
     common options as ``tracking_v0``, the disturbance options with ``unknown_input=True``;
     ``scenario=`` is not accepted here: use ``dobs_envs.envs.make_parallel_env(scenario)``).
+    The agents' observation widths differ (their nodes measure different outputs; with
+    ``generator_kwargs={"inputs_per_controller": (1, 2)}`` their channel widths too):
+    ``normalized_actions=True, padded_observations=True`` give them identical spaces for a
+    shared policy (see ``tracking_v0``).
 
     ## Version History
 

@@ -108,7 +108,8 @@ class TrackingEnv(DObsParallelEnv):
     horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
     action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0)`` (the fields of :class:`~dobs_envs.envs.options.EnvOptions`,
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False)``
+    (the fields of :class:`~dobs_envs.envs.options.EnvOptions`,
     which validates them; the same keywords for ``gym.make``/``gym.make_vec`` of
     ``dobs_envs/Tracking-v0`` except ``max_cycles``/``horizon``, there
     ``max_episode_steps``).
@@ -120,6 +121,18 @@ class TrackingEnv(DObsParallelEnv):
     ``scenario=`` replaces NE2 by any Scenario with a reference signal.
     ``disturbance``/``disturbance_amplitude`` apply to systems with an unknown input only
     (NE2 has none: other values raise ``ValueError``).
+    ``normalized_actions=True`` gives every agent the action space ``Box(-1, 1, (M,), float32)``,
+    ``M`` the largest number of input channels of any agent (here 1): entry ``j < m_k`` is
+    mapped onto channel ``k``'s bound (``u = a * b``), entries ``j >= m_k`` are ignored
+    (the centralised ``gym.make`` view then takes ``Box(-1, 1, (m,))``).
+    ``padded_observations=True`` gives every agent the observation ``[o_k, 0...0 | mask]``:
+    its own observation zero-padded to the widest agent's width ``W``, then ``W`` mask
+    entries (1 = real, 0 = padding; component ``"obs_mask"`` of ``observation_layout``),
+    with the same bounds for every agent. Use both when one policy is shared by all agents
+    (parameter sharing in SuperSuit, RLlib, BenchMARL MAPPO/IPPO, TorchRL): every agent then
+    has identical spaces, which these libraries require, and ``[-1, 1]`` actions suit their
+    Gaussian policies. Leave them off for per-agent policies that know their own bounds
+    and widths (the defaults are the agents' true spaces).
     Unknown arguments raise ``TypeError`` listing the valid ones.
 
     ## Version History

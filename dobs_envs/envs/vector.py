@@ -94,6 +94,8 @@ class DObsVectorEnv(VectorEnv):
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape} (copies, inputs), got {a.shape}")
+        if self.core.normalized_actions:
+            a = a * self.core.action_scale
         again = self._autoreset
         if again.any():
             a = a.copy()
