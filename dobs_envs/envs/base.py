@@ -20,7 +20,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from .distributions import DEFAULT_INIT_NOISE
-from .options import EnvOptions
+from .options import RENDER_MODES, EnvOptions
+from .rendering import LivePlot
 from .spec import EnvSpec
 
 __all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS", "agent_spaces"]
@@ -63,7 +64,8 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
     class-level task hooks and :meth:`make_core` come from :class:`~dobs_envs.envs.spec.EnvSpec`.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "dobs_envs_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "dobs_envs_v0", "is_parallelizable": True,
+                "render_fps": 20}
     DEFAULT_INIT_NOISE = DEFAULT_INIT_NOISE
     #: label of the task error in render(); None: ||x - x_r|| or ||x||
     TASK_ERROR_LABEL = None
@@ -72,6 +74,7 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
     def __init__(self, **kwargs):
         self.core = c = self.make_core(1, **kwargs)
         self.render_mode = c.options.render_mode
+        self._live = None  # render_mode="human": the live window (created on first use)
         self.possible_agents = list(c.agents)
         self.agents = []
         self._agent_id = {a: k for k, a in enumerate(self.possible_agents)}
@@ -146,6 +149,8 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                 self._obs_spaces[a].seed(int(seed) + k)
         self.core.reset(None, None if seed is None else [seed], options)
         self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.show(force=True)
         return self._observations(), self._infos(0)
 
     def step(self, actions: dict):
@@ -170,6 +175,8 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                dict.fromkeys(agents, trunc), self._infos(int(res.reason[0])))
         if term or trunc:
             self.agents = []
+        if self.render_mode == "human":
+            self.show(force=term or trunc)
         return out
 
     def _parse_actions(self, actions, u):
@@ -251,22 +258,41 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         """Current :class:`~dobs_envs.sim.SimState` (batch size 1; a snapshot), None before reset()."""
         return self.core.sim_state if self.core.started else None
 
+    def _task_label(self) -> str:
+        return self.TASK_ERROR_LABEL or (r"$\|x - x_r\|$" if self.core.has_reference else r"$\|x\|$")
+
     def render(self):
+        """``render_mode="rgb_array"``: the error plot as an RGB image ``(H, W, 3)`` uint8;
+        ``"human"``: redraw the live window (``reset``/``step`` redraw it too) and return None."""
         if self.render_mode is None:
             import gymnasium
 
-            gymnasium.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to the constructor")
+            gymnasium.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' "
+                                  "(images) or 'human' (a live window) to the constructor")
             return None
         if self.core.history is None:
             raise RuntimeError("call reset() before render()")
+        if self.render_mode == "human":
+            self.show(force=True)
+            return None
         from .rendering import error_plot
 
         t, te, ee = self.core.history
-        label = self.TASK_ERROR_LABEL or (r"$\|x - x_r\|$" if self.core.has_reference else r"$\|x\|$")
         return error_plot(np.asarray(t), np.asarray(te), np.asarray(ee), title=self.metadata["name"],
-                          tracking_label=label)
+                          tracking_label=self._task_label())
+
+    def show(self, force: bool = False) -> None:
+        """``render_mode="human"``: redraw the live window of the error plot (at most ``render_fps``
+        times a second unless ``force``; headless machines: one warning, nothing shown)."""
+        if self.core.history is None:
+            return
+        if self._live is None:
+            self._live = LivePlot(self.metadata["name"], self._task_label(), self.metadata["render_fps"])
+        self._live.update(*self.core.history, force=force)
 
     def close(self):
+        if self._live is not None:
+            self._live.close()
         self.core.close()
 
 
@@ -303,7 +329,7 @@ def make_parallel_env(scenario, **options) -> DObsParallelEnv:
       ``t_end``), so that diverging early never pays.
     - ``disturbance`` ("exosystem" | "random" | "none") and ``disturbance_amplitude`` (2.0)
       for systems with an unknown input (:mod:`dobs_envs.envs.distributions`).
-    - ``render_mode`` (None | "rgb_array").
+    - ``render_mode`` (None | "rgb_array" | "human": a live matplotlib window; headless: a warning).
     - ``normalized_actions`` (False): every agent acts in ``Box(-1, 1, (M,))`` (``M`` the largest
       channel width; entries beyond the agent's own channels are ignored), mapped onto the
       channels' bounds; ``padded_observations`` (False): every agent observes its observation

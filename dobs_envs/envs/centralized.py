@@ -107,6 +107,8 @@ class CentralizedEnv(gym.Env):
         if seed is not None:
             self.action_space.seed(int(seed))
         self.core.reset(None, None, options)
+        if self.render_mode == "human":
+            self.parallel_env.show(force=True)
         return self._obs(), self._info(0)
 
     def step(self, action):
@@ -121,6 +123,8 @@ class CentralizedEnv(gym.Env):
         np.multiply(a, self.core.action_scale, out=self._u[0])
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
+        if self.render_mode == "human":
+            self.parallel_env.show(force=term or trunc)
         return self._obs(), float(res.reward[0]), term, trunc, self._info(int(res.reason[0]))
 
     def _obs(self) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
+from .options import RENDER_MODES
 
 __all__ = ["DisturbanceRejectionEnv", "NE3_ACTION_BOUND"]
 
@@ -110,7 +111,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}
 
     @classmethod
     def _default_scenario(cls, opts):

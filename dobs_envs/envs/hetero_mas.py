@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
-from .options import HeteroMASOptions
+from .options import RENDER_MODES, HeteroMASOptions
 
 __all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND", "Disagreement"]
 
@@ -105,7 +105,7 @@ class HeteroMASEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
     Options = HeteroMASOptions
     TASK_ERROR_LABEL = r"$\|p - \bar p\,1\|$"
     _TASK_KEYS = ("q_rest", "r", "rho")

@@ -28,8 +28,8 @@ __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", 
 REWARDS = ("quadratic", "log", "sqrt")
 #: unknown-input signals of the ``disturbance`` option
 DISTURBANCES = ("exosystem", "random", "none")
-#: render modes of every environment
-RENDER_MODES = ("rgb_array",)
+#: render modes of every environment ("human": a live matplotlib window, see dobs_envs.envs.rendering)
+RENDER_MODES = ("human", "rgb_array")
 
 _NUM = (int, float, np.integer, np.floating)
 
@@ -76,7 +76,9 @@ class EnvOptions:
     cost_scale : float
         Error norm ``c0 = lambda_max(Q) cost_scale^2`` of the log reward.
     render_mode : str, optional
-        ``None`` or ``"rgb_array"``.
+        ``None``, ``"rgb_array"`` (``render()`` returns the error plot as an image) or ``"human"``
+        (a live matplotlib window of the error plot, redrawn by ``reset``/``step``; on a machine
+        without a display one warning and nothing shown).
     disturbance : str
         ``"exosystem"``, ``"random"`` or ``"none"`` (systems with an unknown input only).
     disturbance_amplitude : float

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from .base import DObsParallelEnv
-from .options import RandomNetworkOptions
+from .options import RENDER_MODES, RandomNetworkOptions
 
 __all__ = ["RandomNetworkEnv"]
 
@@ -104,7 +104,7 @@ class RandomNetworkEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
     Options = RandomNetworkOptions
     REJECT_OPTIONS = ("scenario",)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
+from .options import RENDER_MODES
 
 __all__ = ["TrackingEnv", "NE2_ACTION_BOUND"]
 
@@ -140,7 +141,7 @@ class TrackingEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
 
     @classmethod
     def _default_scenario(cls, opts):
