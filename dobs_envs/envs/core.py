@@ -276,13 +276,23 @@ class EnvCore:
         self._W[:, L.one] = 1.0
         self._obs = np.zeros((B, self.n_agents, self.obs_dim), dtype=self.obs_dtype)
         outf, outb = np.zeros((4, B)), np.zeros((3, B), dtype=bool)
-        self._rew, self._cost, self._err, self._xn = outf
-        self._fin, self._term, self._trunc = outb
-        self._fin[:] = True
+        outb[0] = True  # finite
         self._reason, self._cycles = np.zeros(B, np.int8), np.zeros(B, np.int64)
         self._sig = np.zeros((3, B, m_v, N_RANDOM_TERMS))
         self._state = (self._t, self._x, self._z, self._g, self._gs, self._v, self._xr)
         self._outs = (outf, outb, self._reason, self._cycles)
+        self._views()
+
+    #: attributes that are views of the buffers (rebuilt by _views, not pickled)
+    _VIEWS = ("_rew", "_cost", "_err", "_xn", "_fin", "_term", "_trunc", "observations", "estimation_errors",
+              "applied_inputs", "tracking_errors", "features", "cycles", "gamma", "gamma_s", "_result", "_all_rows")
+
+    def _views(self) -> None:
+        """The named views of the buffers (the kernels write the buffers; these read them)."""
+        B, N, L = self.num_envs, self.n_nodes, self.layout
+        outf, outb = self._outs[0], self._outs[1]
+        self._rew, self._cost, self._err, self._xn = outf
+        self._fin, self._term, self._trunc = outb
         F = L.size
         self.observations = _ro(self._obs)
         self.estimation_errors = _ro(self._W[:, F:F + N])
@@ -293,6 +303,17 @@ class EnvCore:
         self.gamma, self.gamma_s = _ro(self._g), _ro(self._gs)
         self._result = StepResult(_ro(self._rew), _ro(self._term), _ro(self._trunc), _ro(self._reason))
         self._all_rows = np.arange(B, dtype=np.int64)
+
+    # ------------------------------------------------------------------ pickling (copy.deepcopy, cloudpickle)
+    def __getstate__(self) -> dict:
+        # pickle keeps shared *objects* but not views sharing memory: the views are rebuilt on load,
+        # the worker threads are not copied
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS and k != "_pool"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._pool = None
+        self._views()
 
     # ------------------------------------------------------------------ properties
     @property

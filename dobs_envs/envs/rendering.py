@@ -143,6 +143,9 @@ class LivePlot:
         self._fig.canvas.flush_events()
         self._last = time.perf_counter()
 
+    def __getstate__(self) -> dict:  # a copy of an environment opens its own window
+        return {**self.__dict__, "_fig": None, "_ax": None, "_plt": None, "_lines": None, "_last": -np.inf}
+
     def close(self) -> None:
         """Close the window (if any)."""
         if self._fig is not None:
