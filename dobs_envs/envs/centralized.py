@@ -120,7 +120,7 @@ class CentralizedEnv(gym.Env):
             raise ValueError(f"action must be a numeric array of shape ({self._u.shape[1]},), got {action!r}") from None
         if a.shape != self._u.shape[1:]:
             raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
-        np.multiply(a, self.core.action_scale, out=self._u[0])
+        self._u[0] = a * self.core.action_scale if self.core.normalized_actions else a
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
         if self.render_mode == "human":
