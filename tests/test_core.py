@@ -203,3 +203,5 @@ def test_pickled_core_and_env_keep_running():
         for a, b in zip(out, outs[0]):
             assert repr(a) == repr(b)
     assert copies[0].core._rew.base is copies[0].core._outs[0]
+    # the same argument types as the original's: the compiled step is not specialised again
+    assert [a.flags.writeable for a in copies[1].core._ka] == [a.flags.writeable for a in env.core._ka]

@@ -314,6 +314,8 @@ class EnvCore:
         self.__dict__.update(state)
         self._pool = None
         self._views()
+        for a in self._ka:  # read-only as built: the compiled step is specialised on it (no recompilation)
+            a.flags.writeable = False
 
     # ------------------------------------------------------------------ properties
     @property
