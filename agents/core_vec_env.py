@@ -30,6 +30,9 @@ over the Gymnasium env):
 - **Seeding**: :meth:`seed` makes the next :meth:`reset` seed copy ``c`` with ``seed + c``; later
   autoresets draw from the copy's own generator (reproducible runs).
 - ``rescale_actions``: actions in ``[-1, 1]`` mapped affinely onto each input's bounds (clipped first).
+- The core's options ``normalized_actions`` / ``padded_observations`` apply: the slots' spaces are
+  built from the env's own (``dobs_envs.envs.base.agent_spaces``, ``central_spaces``), and actions
+  in the env's units are mapped to inputs by ``core.action_scale``.
 - Wrap it in ``VecMonitor`` for episode returns/lengths in the infos (``agents.train.build_vec_env`` does).
 """
 from __future__ import annotations
