@@ -25,7 +25,9 @@ the estimate ``xhat_{links[k]}`` its observer node sends over the C-O link
   inputs.
 
 Actions are float64 (the environments accept any float dtype and simulate in
-float64; out-of-range values would be clipped by the environment).
+float64; out-of-range values would be clipped by the environment). The policies compute
+the inputs ``u`` and hand them over in the environment's action format
+(``DObsParallelEnv.actions_from_inputs``: scaled and padded with ``normalized_actions``).
 """
 from __future__ import annotations
 
@@ -77,6 +79,7 @@ class SeparationPolicy:
             # the laws themselves live in dobs_envs.control.laws (one implementation)
             self._law = SeparationController.from_scenario(sc, kind)
         self.kind = kind
+        self._env = base
         self.agents = list(base.possible_agents)
         self.period = float(base.control_period)
         self._slices = tuple(base.channel_slices)
@@ -93,7 +96,6 @@ class SeparationPolicy:
                 if "r" not in lay:
                     raise ValueError(f"the tracking policy reads 'r' from the observation; agent {a!r}'s observation has {list(lay)}")
                 self._r[a] = lay["r"]
-        self._index = {a: k for k, a in enumerate(self.agents)}
         self._signal = sc.prescribed_input
         self.reset()
 
@@ -113,10 +115,15 @@ class SeparationPolicy:
         self._steps = 0
 
     def __call__(self, observations: dict) -> dict:
+        acts = self._env.actions_from_inputs(self.inputs(observations))
+        return {a: acts[a] for a in observations}
+
+    def inputs(self, observations: dict) -> np.ndarray:
+        """The inputs ``u (m,)`` of the law for ``observations`` (advances the law's state)."""
         if self.kind == "open_loop":
             u = self._signal(self._steps * self.period)
             self._steps += 1
-            return {a: u[self._slices[self._index[a]]].copy() for a in observations}
+            return np.asarray(u, dtype=np.float64)
         # every input row j gets the estimate of the controller node owning it
         xs = np.stack([np.asarray(observations[a][self._xhat[a]], dtype=np.float64) for a in self.agents])
         xl = np.repeat(xs, self._widths, axis=0)[None]
@@ -125,7 +132,7 @@ class SeparationPolicy:
             r = np.concatenate([np.asarray(observations[a][self._r[a]], dtype=np.float64) for a in self.agents])[None]
         u, self._cstate = self._law.act_rows(xl, r, self._cstate, self.period)
         self._steps += 1
-        return {a: u[0, self._slices[self._index[a]]] for a in observations}
+        return u[0]
 
 
 class CentralizedSeparationPolicy:
@@ -143,8 +150,8 @@ class CentralizedSeparationPolicy:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         g = self.genv
-        acts = self.policy({a: obs[sl] for a, sl in zip(g.agents, g.agent_observation_slices)})
-        return np.concatenate([acts[a] for a in g.agents])
+        u = self.policy.inputs({a: obs[sl] for a, sl in zip(g.agents, g.agent_observation_slices)})
+        return u / g.core.action_scale  # the centralised action (normalized_actions: u / bound)
 
 
 class ZeroPolicy:

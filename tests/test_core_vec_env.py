@@ -79,13 +79,13 @@ def test_terminal_observation_truncation_and_autoreset():
         if done[5]:
             break
     assert done[5:].all() and not done[:5].any()
-    assert all(i["TimeLimit.truncated"] is False and i["termination_reason"] == "state_bound_exceeded"
-               for i in infos[5:])
+    assert all(i["TimeLimit.truncated"] is False and i["termination_reason"] == 1 for i in infos[5:])
+    assert all(i["termination_reason"] == 0 and "terminal_observation" not in i for i in infos[:5])
     assert "terminal_observation" in infos[5] and not np.array_equal(infos[5]["terminal_observation"], obs[5])
     assert rew[5] == rew[9] and rew[0] == rew[4]
     while not done[0]:
         obs, rew, done, infos = venv.step(np.zeros((10, 1), np.float32))
-    assert infos[0]["TimeLimit.truncated"] is True and "termination_reason" not in infos[0]
+    assert infos[0]["TimeLimit.truncated"] is True and infos[0]["termination_reason"] == 3  # horizon
     assert core.cycles[0] == 0  # reset in the same step (SB3 convention)
 
 

@@ -40,7 +40,7 @@ def test_module_conventions(mod):
     env = mod.parallel_env()
     assert isinstance(env, mod.raw_env)
     md = env.metadata
-    assert md["render_modes"] == ["rgb_array"] and md["is_parallelizable"] is True
+    assert md["render_modes"] == ["human", "rgb_array"] and md["is_parallelizable"] is True
     assert md["name"] == mod.__name__.rsplit(".", 1)[1] and md["render_fps"] > 0
     assert env.possible_agents[0] == "controller_0"
     for a in env.possible_agents:

@@ -210,7 +210,7 @@ def test_termination_on_state_bound():
         if term["controller_0"]:
             break
     assert term["controller_0"] and not trunc["controller_0"] and env.agents == []
-    assert info["controller_0"]["termination_reason"] == "state_bound_exceeded"
+    assert info["controller_0"]["termination_reason"] == 1  # REASONS[1] == "state_bound_exceeded"
     assert np.linalg.norm(env.sim_state.x[0]) > 15.0
     with pytest.raises(RuntimeError, match="reset"):
         env.step(hi)
@@ -353,5 +353,40 @@ def test_render_rgb_array():
     genv.step(genv.action_space.sample())
     assert genv.render().shape[2] == 3
     assert tracking_v0.parallel_env().render_mode is None
-    with pytest.raises(ValueError):
-        tracking_v0.parallel_env(render_mode="human")
+    with pytest.raises(ValueError, match="render_mode"):
+        tracking_v0.parallel_env(render_mode="ansi")
+
+
+def _headless_human(make, step):
+    """``render_mode="human"`` under a non-interactive backend: one warning, render() None, no error."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # what CI and headless machines run (MPLBACKEND=Agg / no display)
+    import warnings
+
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        env = make()
+        env.reset(seed=0)
+        for _ in range(3):
+            step(env)
+        assert env.render() is None
+        env.close()
+    msgs = [str(x.message) for x in w if "render_mode='human'" in str(x.message)]
+    assert len(msgs) == 1 and "rgb_array" in msgs[0], msgs
+
+
+def test_render_human_headless_warns_once():
+    _headless_human(lambda: tracking_v0.parallel_env(render_mode="human"), lambda e: e.step(_zero(e)))
+    _headless_human(lambda: gym.make("dobs_envs/Tracking-v0", render_mode="human"),
+                    lambda e: e.step(np.zeros(5, np.float32)))
+    _headless_human(lambda: gym.make_vec("dobs_envs/Tracking-v0", num_envs=2, render_mode="human"),
+                    lambda e: e.step(np.zeros((2, 5), np.float32)))
+
+
+def test_render_human_backend_detection():
+    from dobs_envs.envs.rendering import is_interactive_backend
+
+    assert not is_interactive_backend("agg") and not is_interactive_backend("pdf")
+    assert is_interactive_backend("TkAgg") and is_interactive_backend("QtAgg")
+    assert not is_interactive_backend("module://matplotlib_inline.backend_inline")

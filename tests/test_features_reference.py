@@ -36,9 +36,10 @@ def _both(core, SF, SI, rows):
     return res
 
 
-@pytest.mark.parametrize("observation", ["full", "local"])
-def test_features_match_reference_over_a_converging_run(observation):
-    env = tracking_v0.parallel_env(observation=observation, obs_dtype="float64", max_cycles=STEPS)
+@pytest.mark.parametrize("observation,padded", [("full", False), ("local", False), ("local", True)])
+def test_features_match_reference_over_a_converging_run(observation, padded):
+    env = tracking_v0.parallel_env(observation=observation, obs_dtype="float64", max_cycles=STEPS,
+                                   padded_observations=padded)
     core = env.core
     SF, SI = _static(core)
     rows = np.array([0])

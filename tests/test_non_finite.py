@@ -1,8 +1,8 @@
 """A non-finite simulated state terminates the episode cleanly (issue 11, part 4).
 
 What happens on that terminal step (documented in the env docstrings, "Episode End"):
-``terminated`` is True for every agent with ``info[agent]["termination_reason"] ==
-"non_finite_state"``; observations and ``state()`` are cleaned (NaN -> 0, +-inf ->
+``terminated`` is True for every agent with ``info[agent]["termination_reason"] == 2``
+(``REASONS[2] == "non_finite_state"``); observations and ``state()`` are cleaned (NaN -> 0, +-inf ->
 +-largest finite value of the observation dtype); the reward is finite; ``info``
 keeps the raw (possibly non-finite) diagnostics.
 """
@@ -21,7 +21,7 @@ from dobs_envs.envs.numpy_features import write_features_reference
 def _assert_clean_termination(env, obs, rew, term, trunc, info):
     for a in env.possible_agents:
         assert term[a] and not trunc[a]
-        assert info[a]["termination_reason"] == "non_finite_state"
+        assert REASONS[info[a]["termination_reason"]] == "non_finite_state"
         assert np.all(np.isfinite(obs[a])) and env.observation_space(a).contains(obs[a])
         assert np.isfinite(rew[a])
     assert np.all(np.isfinite(env.state()))
@@ -69,7 +69,7 @@ def test_core_reports_the_reason_code_per_copy():
     obs, rew, term, trunc, info = venv.step(np.zeros((3, 5), np.float32))
     np.testing.assert_array_equal(term, [False, True, True])
     np.testing.assert_array_equal(info["termination_reason"], [0, 2, 1])
-    assert [REASONS[int(c)] for c in info["termination_reason"]] == [None, "non_finite_state", "state_bound_exceeded"]
+    assert [REASONS[int(c)] for c in info["termination_reason"]] == ["none", "non_finite_state", "state_bound_exceeded"]
     assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rew))
 
 
@@ -79,7 +79,7 @@ def test_gymnasium_view_terminates_cleanly():
         env = gym.make("dobs_envs/Tracking-v0", state_bound=1e150, action_bound=1e30)
     env.reset(seed=0)
     obs, rew, term, trunc, info = env.step(np.full(5, 1e30, np.float32))
-    assert term and not trunc and info["termination_reason"] == "non_finite_state"
+    assert term and not trunc and REASONS[info["termination_reason"]] == "non_finite_state"
     assert np.all(np.isfinite(obs)) and np.isfinite(rew)
 
 

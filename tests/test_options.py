@@ -69,7 +69,7 @@ def test_unknown_keyword_is_worded_as_python():
     ({"obs_dtype": "int8"}, "obs_dtype"), ({"action_bound": "big"}, "action_bound"),
     ({"action_bound": [1.0, -1.0]}, "action_bound"), ({"init_noise": -1}, "init_noise"),
     ({"state_bound": 1e200}, "state_bound"), ({"reward": "exp"}, "reward must be one of"),
-    ({"cost_scale": True}, "cost_scale"), ({"render_mode": "human"}, "render_mode"),
+    ({"cost_scale": True}, "cost_scale"), ({"render_mode": "ansi"}, "render_mode"),
     ({"disturbance": "wind"}, "disturbance"), ({"disturbance_amplitude": np.nan}, "disturbance_amplitude"),
     ({"observation": 3}, "observation")])
 def test_validation_names_the_option(kw, match):

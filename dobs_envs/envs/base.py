@@ -19,12 +19,12 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .core import REASONS
 from .distributions import DEFAULT_INIT_NOISE
-from .options import EnvOptions
+from .options import RENDER_MODES, EnvOptions
+from .rendering import LivePlot
 from .spec import EnvSpec
 
-__all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS"]
+__all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS", "agent_spaces"]
 
 #: Options every environment accepts, with their defaults (the fields of :class:`~dobs_envs.envs.options.EnvOptions`).
 COMMON_OPTIONS = EnvOptions.defaults()
@@ -37,6 +37,24 @@ _CORE_ATTRS = frozenset({
     "init_noise", "penalty_cycles"})
 
 
+def agent_spaces(core) -> tuple[list, list]:
+    """``(observation Boxes, action Boxes)`` of the agents of ``core``, in agent order.
+
+    Actions: ``Box(-b_k, b_k, (m_k,), float32)`` with channel ``k``'s bounds, or with
+    ``normalized_actions`` the common ``Box(-1, 1, (M,), float32)`` (``M = max_k m_k``).
+    Observations: ``Box(low_k, high_k)`` of agent ``k``'s width (``padded_observations``: the
+    same padded-and-masked Box for every agent).
+    """
+    obs = [spaces.Box(*core.observation_bounds(k), dtype=core.obs_dtype) for k in range(core.n_agents)]
+    if core.normalized_actions:
+        M = int(core.agent_action_widths[0])
+        act = [spaces.Box(-1.0, 1.0, (M,), dtype=np.float32) for _ in range(core.n_agents)]
+    else:
+        b = core.action_bound.astype(np.float32)
+        act = [spaces.Box(-b[s], b[s], dtype=np.float32) for s in core.channel_slices]
+    return obs, act
+
+
 class DObsParallelEnv(EnvSpec, ParallelEnv):
     """Distributed observer-based control of a linear plant (generic PettingZoo ParallelEnv).
 
@@ -46,7 +64,8 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
     class-level task hooks and :meth:`make_core` come from :class:`~dobs_envs.envs.spec.EnvSpec`.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "dobs_envs_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "dobs_envs_v0", "is_parallelizable": True,
+                "render_fps": 20}
     DEFAULT_INIT_NOISE = DEFAULT_INIT_NOISE
     #: label of the task error in render(); None: ||x - x_r|| or ||x||
     TASK_ERROR_LABEL = None
@@ -55,19 +74,21 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
     def __init__(self, **kwargs):
         self.core = c = self.make_core(1, **kwargs)
         self.render_mode = c.options.render_mode
+        self._live = None  # render_mode="human": the live window (created on first use)
         self.possible_agents = list(c.agents)
         self.agents = []
         self._agent_id = {a: k for k, a in enumerate(self.possible_agents)}
-        self._widths = tuple(int(w) for w in c.action_widths)
+        self._widths = tuple(int(w) for w in c.agent_action_widths)
+        self._offsets = tuple(int(o) for o in np.cumsum((0,) + self._widths[:-1]))
         self._shapes = [(w,) for w in self._widths]
         self._obs_w = tuple(int(w) for w in c.obs_widths)
-        b = c.action_bound.astype(np.float32)
-        self._action_spaces = {a: spaces.Box(-b[s], b[s], dtype=np.float32) for a, s in zip(self.possible_agents,
-                                                                                          c.channel_slices)}
-        self._obs_spaces = {a: spaces.Box(*c.observation_bounds(k), dtype=c.obs_dtype)
-                            for k, a in enumerate(self.possible_agents)}
+        obs_spaces, act_spaces = agent_spaces(c)
+        self._action_spaces = dict(zip(self.possible_agents, act_spaces))
+        self._obs_spaces = dict(zip(self.possible_agents, obs_spaces))
         self.state_space = spaces.Box(-np.inf, np.inf, shape=(c.state_dim,), dtype=c.obs_dtype)
         self._u = np.zeros((1, c.n_inputs))
+        # normalized_actions: the agents' actions concatenated, mapped to u by core.agent_inputs
+        self._a = np.zeros((1, int(c.agent_action_widths.sum()))) if c.normalized_actions else None
 
     def __getattr__(self, name):
         core = self.__dict__.get("core")
@@ -128,33 +149,39 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                 self._obs_spaces[a].seed(int(seed) + k)
         self.core.reset(None, None if seed is None else [seed], options)
         self.agents = list(self.possible_agents)
-        return self._observations(), self._infos(None)
+        if self.render_mode == "human":
+            self.show(force=True)
+        return self._observations(), self._infos(0)
 
     def step(self, actions: dict):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode (no live agents); call reset() first")
-        u = self._u[0]
-        try:  # fast path: exactly the agents, right shapes, numeric -> one concatenate into u
+        buf = self._u if self._a is None else self._a
+        try:  # fast path: exactly the agents, right shapes, numeric -> one concatenate into buf
             vals = [actions[a] for a in self.possible_agents]
             ok = len(actions) == len(vals) and [v.shape for v in vals] == self._shapes
             if ok:
-                np.concatenate(vals, out=u, casting="same_kind")
+                np.concatenate(vals, out=buf[0], casting="same_kind")
         except (KeyError, TypeError, ValueError, AttributeError):
             ok = False
         if not ok:
-            self._parse_actions(actions, u)
+            self._parse_actions(actions, buf[0])
+        if self._a is not None:
+            self.core.agent_inputs(self._a, out=self._u)
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
-        reason = REASONS[int(res.reason[0])] if term or trunc else None
         agents = self.possible_agents
         out = (self._observations(), dict.fromkeys(agents, float(res.reward[0])), dict.fromkeys(agents, term),
-               dict.fromkeys(agents, trunc), self._infos(reason))
+               dict.fromkeys(agents, trunc), self._infos(int(res.reason[0])))
         if term or trunc:
             self.agents = []
+        if self.render_mode == "human":
+            self.show(force=term or trunc)
         return out
 
     def _parse_actions(self, actions, u):
-        """Validate ``actions`` agent by agent (errors name the agent) and write them into ``u``."""
+        """Validate ``actions`` agent by agent (errors name the agent) and write them into ``u``
+        (the agents' actions concatenated)."""
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
         new = u.copy()
@@ -166,26 +193,37 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
                 raise ValueError(f"action of agent {agent!r} is not a numeric array: {a!r}") from None
             if arr.shape != (self._widths[k],):
                 raise ValueError(f"action of agent {agent!r} must have shape ({self._widths[k]},), got {arr.shape}")
-            new[self.core.channel_slices[k]] = arr
+            new[self._offsets[k]:self._offsets[k] + self._widths[k]] = arr
         missing = [a for a in self.possible_agents if a not in actions]
         if missing:
             raise ValueError(f"missing action(s) for agent(s) {missing}")
         u[:] = new
+
+    def actions_from_inputs(self, u) -> dict:
+        """``{agent: action}`` that applies the inputs ``u (m,)``: the channels' parts of ``u``, or with
+        ``normalized_actions`` divided by their bounds and zero-padded (for controllers that compute
+        inputs, e.g. :mod:`baselines.policies`)."""
+        c = self.core
+        u = np.asarray(u, dtype=np.float64).reshape(c.n_inputs)
+        if not c.normalized_actions:
+            return {a: u[s].copy() for a, s in zip(self.possible_agents, c.channel_slices)}
+        flat = np.zeros(int(c.agent_action_widths.sum()))
+        flat[c.action_gather] = u / c.action_scale
+        return {a: flat[o:o + w] for a, o, w in zip(self.possible_agents, self._offsets, self._widths)}
 
     def _observations(self) -> dict:
         """Per-agent observations: views into this step's fresh copy of the core's (K, D) row."""
         o = self.core.observations[0].copy()
         return {a: o[k, :w] for k, (a, w) in enumerate(zip(self.possible_agents, self._obs_w))}
 
-    def _infos(self, reason) -> dict:
+    def _infos(self, reason: int) -> dict:
+        """Per-agent infos: the same numeric keys from ``reset`` on (see :data:`INFO_KEYS`)."""
         c = self.core
         ee, te = c.estimation_errors[0].tolist(), float(c.tracking_errors[0])
         g, gs = c.gamma[0].tolist(), c.gamma_s[0].tolist()
-        extra = {}
+        extra = {"termination_reason": reason}
         if c.task_error_key is not None:
-            extra[c.task_error_key] = float(c.task_errors()[0])
-        if reason is not None:
-            extra["termination_reason"] = reason
+            extra = {c.task_error_key: float(c.task_errors()[0]), **extra}
         return {a: {"estimation_error": ee[i], "tracking_error": te, "gamma": g[i], "gamma_s": gs[i], **extra}
                 for a, i in zip(self.possible_agents, c.links)}
 
@@ -220,22 +258,41 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         """Current :class:`~dobs_envs.sim.SimState` (batch size 1; a snapshot), None before reset()."""
         return self.core.sim_state if self.core.started else None
 
+    def _task_label(self) -> str:
+        return self.TASK_ERROR_LABEL or (r"$\|x - x_r\|$" if self.core.has_reference else r"$\|x\|$")
+
     def render(self):
+        """``render_mode="rgb_array"``: the error plot as an RGB image ``(H, W, 3)`` uint8;
+        ``"human"``: redraw the live window (``reset``/``step`` redraw it too) and return None."""
         if self.render_mode is None:
             import gymnasium
 
-            gymnasium.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to the constructor")
+            gymnasium.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' "
+                                  "(images) or 'human' (a live window) to the constructor")
             return None
         if self.core.history is None:
             raise RuntimeError("call reset() before render()")
+        if self.render_mode == "human":
+            self.show(force=True)
+            return None
         from .rendering import error_plot
 
         t, te, ee = self.core.history
-        label = self.TASK_ERROR_LABEL or (r"$\|x - x_r\|$" if self.core.has_reference else r"$\|x\|$")
         return error_plot(np.asarray(t), np.asarray(te), np.asarray(ee), title=self.metadata["name"],
-                          tracking_label=label)
+                          tracking_label=self._task_label())
+
+    def show(self, force: bool = False) -> None:
+        """``render_mode="human"``: redraw the live window of the error plot (at most ``render_fps``
+        times a second unless ``force``; headless machines: one warning, nothing shown)."""
+        if self.core.history is None:
+            return
+        if self._live is None:
+            self._live = LivePlot(self.metadata["name"], self._task_label(), self.metadata["render_fps"])
+        self._live.update(*self.core.history, force=force)
 
     def close(self):
+        if self._live is not None:
+            self._live.close()
         self.core.close()
 
 
@@ -272,7 +329,12 @@ def make_parallel_env(scenario, **options) -> DObsParallelEnv:
       ``t_end``), so that diverging early never pays.
     - ``disturbance`` ("exosystem" | "random" | "none") and ``disturbance_amplitude`` (2.0)
       for systems with an unknown input (:mod:`dobs_envs.envs.distributions`).
-    - ``render_mode`` (None | "rgb_array").
+    - ``render_mode`` (None | "rgb_array" | "human": a live matplotlib window; headless: a warning).
+    - ``normalized_actions`` (False): every agent acts in ``Box(-1, 1, (M,))`` (``M`` the largest
+      channel width; entries beyond the agent's own channels are ignored), mapped onto the
+      channels' bounds; ``padded_observations`` (False): every agent observes its observation
+      zero-padded to the widest agent's width plus a 0/1 mask of the same width. Together they
+      give all agents identical spaces (parameter sharing without wrappers).
 
     Raises the design layer's :class:`~dobs_envs.assumptions.AssumptionError` when the
     system does not satisfy the paper's assumptions.

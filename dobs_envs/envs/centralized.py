@@ -13,10 +13,16 @@ dict round trip); the parallel env's diagnostics (``state()``, ``estimation_erro
   ``Box(-b, b, (m,), float32)`` with the parallel env's bounds
   (``env.agent_action_slices[k]`` is channel ``k``); out-of-range values are
   clipped, NaN/inf or a wrong shape raise ``ValueError`` (naming the agent
-  whose channel holds the NaN);
-- reward: the team reward; ``terminated`` as the parallel env; info:
-  ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,), ``gamma_s`` (N,),
-  and ``termination_reason`` when the episode terminated.
+  whose channel holds the NaN); with ``normalized_actions=True`` the action is
+  ``Box(-1, 1, (m,))`` and input ``j`` is ``a_j * b_j`` (no padding: one agent);
+- ``padded_observations=True``: each agent's part is its padded observation and mask
+  (as in the parallel env), so ``agent_observation_slices`` stay the agents' observations;
+- reward: the team reward; ``terminated`` as the parallel env; info (the same keys from
+  ``reset`` on, numeric only): ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,),
+  ``gamma_s`` (N,), the task error if the task has one (e.g. ``disagreement``) and the integer
+  ``termination_reason`` (codes of :data:`~dobs_envs.envs.core.REASONS`: 0 none,
+  1 state_bound_exceeded, 2 non_finite_state, 3 horizon; ``gym.make``'s ``TimeLimit``
+  truncates with code 0).
 
 Registered ids (one per entry of :mod:`dobs_envs.registry`; ``gym.make`` adds a
 ``TimeLimit`` of ``max_episode_steps`` control steps, the default scenario's
@@ -48,14 +54,15 @@ from gymnasium import spaces
 
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 from .base import DObsParallelEnv
-from .core import REASONS
 
 __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "reject_horizon_options"] + [f"make_{name}" for name in ENVIRONMENTS]
 
 
 def central_spaces(core):
     """``(observation Box, action Box, agent observation slices)`` of the centralised view of ``core``:
-    the agents' observations concatenated in agent order, all inputs stacked."""
+    the agents' observations concatenated in agent order (``padded_observations``: each padded and
+    masked), all inputs stacked (``normalized_actions``: ``Box(-1, 1, (m,))``, input ``j`` scaled
+    by its bound, ``core.action_scale``)."""
     lows, highs, sl, pos = [], [], [], 0
     for k, w in enumerate(core.obs_widths):
         lo, hi = core.observation_bounds(k)
@@ -63,7 +70,7 @@ def central_spaces(core):
         highs.append(hi)
         sl.append(slice(pos, pos + int(w)))
         pos += int(w)
-    b = core.action_bound.astype(np.float32)
+    b = np.ones(core.n_inputs, np.float32) if core.normalized_actions else core.action_bound.astype(np.float32)
     return (spaces.Box(np.concatenate(lows), np.concatenate(highs), dtype=core.obs_dtype),
             spaces.Box(-b, b, dtype=np.float32), tuple(sl))
 
@@ -100,7 +107,9 @@ class CentralizedEnv(gym.Env):
         if seed is not None:
             self.action_space.seed(int(seed))
         self.core.reset(None, None, options)
-        return self._obs(), self._info()
+        if self.render_mode == "human":
+            self.parallel_env.show(force=True)
+        return self._obs(), self._info(0)
 
     def step(self, action):
         if not self.core.started:
@@ -111,24 +120,24 @@ class CentralizedEnv(gym.Env):
             raise ValueError(f"action must be a numeric array of shape ({self._u.shape[1]},), got {action!r}") from None
         if a.shape != self._u.shape[1:]:
             raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
-        self._u[0] = a
+        self._u[0] = a * self.core.action_scale if self.core.normalized_actions else a
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
-        info = self._info()
-        if term:
-            info["termination_reason"] = REASONS[int(res.reason[0])]
-        return self._obs(), float(res.reward[0]), term, trunc, info
+        if self.render_mode == "human":
+            self.parallel_env.show(force=term or trunc)
+        return self._obs(), float(res.reward[0]), term, trunc, self._info(int(res.reason[0]))
 
     def _obs(self) -> np.ndarray:
         flat = self.core.observations[0].reshape(-1)
         return flat.copy() if self.core.layout.uniform else flat[self._cat]  # a new array
 
-    def _info(self) -> dict:
+    def _info(self, reason: int) -> dict:
         c = self.core
         info = {"tracking_error": float(c.tracking_errors[0]), "estimation_errors": c.estimation_errors[0].copy(),
                 "gamma": c.gamma[0].copy(), "gamma_s": c.gamma_s[0].copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = float(c.task_errors()[0])
+        info["termination_reason"] = reason
         return info
 
     def render(self):

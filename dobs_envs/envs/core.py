@@ -13,7 +13,11 @@ nodes, ``m`` inputs, ``D`` the widest agent observation.
 ``reset(indices, seeds, options)``  reset all copies or a subset, per-copy seeds and options
 ``advance(u)``                      one control step of every copy; ``u (B, m)``; returns
                                     :class:`StepResult` ``(reward, terminated, truncated, reason)``
-``observations``                    ``(B, K, D)`` padded observations (``obs_widths[k]`` true widths)
+``observations``                    ``(B, K, D)`` padded observations (``obs_widths[k]`` true widths;
+                                    ``padded_observations``: every agent ``D`` wide, mask included)
+``agent_inputs(a)``                 the agents' actions concatenated ``(B, sum(agent_action_widths))``
+                                    -> inputs ``(B, m)`` (``normalized_actions``: gathered from the
+                                    padded actions and scaled by ``action_scale``)
 ``estimation_errors``               ``(B, N)`` ``||xhat_i - x||``
 ``tracking_errors``                 ``(B,)`` ``||x - x_r||`` (or ``||x||``)
 ``task_errors()``                   ``(B,)`` the task's error (tracking error, or e.g. the
@@ -24,12 +28,15 @@ nodes, ``m`` inputs, ``D`` the widest agent observation.
 ``sim_state`` / ``set_sim_state``   snapshot of / overwrite the simulation state
 =================================  ==========================================================
 
-Reason codes (``StepResult.reason``, int8; :data:`REASONS` maps them to the info strings):
+Reason codes (``StepResult.reason``, int8; :data:`REASONS` maps them to their names). Every
+adapter reports the code as the integer info ``termination_reason``, present from ``reset`` on
+(0 there and on every step that does not end the episode):
 
 ====  ========================  ============================================================
 code  name                      meaning
 ====  ========================  ============================================================
-0     ``None``                  the episode goes on
+0     ``none``                  the episode goes on (or was cut by an outer time limit,
+                                e.g. ``gym.make``'s ``TimeLimit``)
 1     ``state_bound_exceeded``  terminated: ``||x|| > state_bound``
 2     ``non_finite_state``      terminated: some entry of x, x_r, z, gamma, gamma_s, v is NaN/inf
 3     ``horizon``               truncated: ``max_cycles`` control steps
@@ -64,8 +71,8 @@ REWARD_CODES = {"quadratic": 0, "log": 1, "sqrt": 2}
 
 __all__ = ["EnvCore", "StepResult", "REASONS", "load_scenario"]
 
-#: reason code -> ``info["termination_reason"]`` string (None: not ended)
-REASONS = {REASON_NONE: None, REASON_STATE_BOUND: "state_bound_exceeded", REASON_NON_FINITE: "non_finite_state",
+#: reason code (the integer ``info["termination_reason"]`` of every adapter) -> name
+REASONS = {REASON_NONE: "none", REASON_STATE_BOUND: "state_bound_exceeded", REASON_NON_FINITE: "non_finite_state",
            REASON_HORIZON: "horizon"}
 
 
@@ -191,12 +198,26 @@ class EnvCore:
             raise ValueError(f"action_bound must be a positive finite scalar or have shape ({m},) (one per input "
                              f"component), got {o.action_bound!r}")
         self.action_bound = _ro(bound)
+        #: option normalized_actions: agents act in [-1, 1]^M (M = max channel width, extra entries ignored)
+        self.normalized_actions = o.normalized_actions
+        M = int(self.action_widths.max())
+        #: width of each agent's action (normalized_actions: the common width M)
+        self.agent_action_widths = _ro(np.full(self.n_agents, M, dtype=np.intp) if o.normalized_actions
+                                       else self.action_widths.copy())
+        starts = np.concatenate([[0], np.cumsum(self.agent_action_widths)[:-1]])
+        #: (m,) position of input j in the agents' actions concatenated (agent-major)
+        self.action_gather = _ro(np.concatenate([starts[k] + np.arange(s.stop - s.start)
+                                                 for k, s in enumerate(self.channel_slices)]).astype(np.intp))
+        #: (m,) action unit -> input: the bound (normalized_actions) or 1
+        self.action_scale = _ro(bound.copy() if o.normalized_actions else np.ones(m))
         # --- observations -------------------------------------------------------------------
         self.obs_dtype = np.dtype(o.obs_dtype)
         comps = resolve_components(o.observation, has_reference=self.has_reference, has_unknown_input=m_v > 0)
         p_i = [c.shape[0] for c in sc.C]
+        #: option padded_observations: every agent observes its padded observation and a 0/1 mask
+        self.padded_observations = o.padded_observations
         self.layout = L = FeatureLayout(p_i, n, m, m_v, [sc.graph.neighbors(i) for i in range(N)], self.links,
-                                        self.channel_slices, comps)
+                                        self.channel_slices, comps, padded=o.padded_observations)
         self.obs_widths, self.obs_dim = _ro(L.widths), L.obs_dim
         self._state_index, self.state_layout = L.state_index(self.has_reference)
         self.state_dim = int(self._state_index.size)
@@ -255,13 +276,23 @@ class EnvCore:
         self._W[:, L.one] = 1.0
         self._obs = np.zeros((B, self.n_agents, self.obs_dim), dtype=self.obs_dtype)
         outf, outb = np.zeros((4, B)), np.zeros((3, B), dtype=bool)
-        self._rew, self._cost, self._err, self._xn = outf
-        self._fin, self._term, self._trunc = outb
-        self._fin[:] = True
+        outb[0] = True  # finite
         self._reason, self._cycles = np.zeros(B, np.int8), np.zeros(B, np.int64)
         self._sig = np.zeros((3, B, m_v, N_RANDOM_TERMS))
         self._state = (self._t, self._x, self._z, self._g, self._gs, self._v, self._xr)
         self._outs = (outf, outb, self._reason, self._cycles)
+        self._views()
+
+    #: attributes that are views of the buffers (rebuilt by _views, not pickled)
+    _VIEWS = ("_rew", "_cost", "_err", "_xn", "_fin", "_term", "_trunc", "observations", "estimation_errors",
+              "applied_inputs", "tracking_errors", "features", "cycles", "gamma", "gamma_s", "_result", "_all_rows")
+
+    def _views(self) -> None:
+        """The named views of the buffers (the kernels write the buffers; these read them)."""
+        B, N, L = self.num_envs, self.n_nodes, self.layout
+        outf, outb = self._outs[0], self._outs[1]
+        self._rew, self._cost, self._err, self._xn = outf
+        self._fin, self._term, self._trunc = outb
         F = L.size
         self.observations = _ro(self._obs)
         self.estimation_errors = _ro(self._W[:, F:F + N])
@@ -272,6 +303,19 @@ class EnvCore:
         self.gamma, self.gamma_s = _ro(self._g), _ro(self._gs)
         self._result = StepResult(_ro(self._rew), _ro(self._term), _ro(self._trunc), _ro(self._reason))
         self._all_rows = np.arange(B, dtype=np.int64)
+
+    # ------------------------------------------------------------------ pickling (copy.deepcopy, cloudpickle)
+    def __getstate__(self) -> dict:
+        # pickle keeps shared *objects* but not views sharing memory: the views are rebuilt on load,
+        # the worker threads are not copied
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS and k != "_pool"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._pool = None
+        self._views()
+        for a in self._ka:  # read-only as built: the compiled step is specialised on it (no recompilation)
+            a.flags.writeable = False
 
     # ------------------------------------------------------------------ properties
     @property
@@ -285,6 +329,18 @@ class EnvCore:
             raise ValueError(f"max_cycles must be None or a positive integer, got {value!r}")
         self._max_cycles = None if value is None else int(value)
         self._consts = self._consts[:7] + (-1 if value is None else int(value),) + self._consts[8:]
+
+    def agent_inputs(self, actions, out: np.ndarray | None = None) -> np.ndarray:
+        """Inputs ``u (B, m)`` (for :meth:`advance`) from the agents' actions concatenated in agent
+        order, ``(B, sum(agent_action_widths))``: with ``normalized_actions`` each agent's first
+        ``m_k`` entries scaled by their bounds (the rest ignored), else the actions themselves."""
+        a = np.asarray(actions, dtype=np.float64)
+        if not self.normalized_actions:
+            if out is None:
+                return a
+            out[...] = a
+            return out
+        return np.multiply(a[..., self.action_gather], self.action_scale, out=out)
 
     def observation_bounds(self, k: int):
         """``(low, high)`` of agent ``k``'s observation (true width ``obs_widths[k]``)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
+from .options import RENDER_MODES
 
 __all__ = ["DisturbanceRejectionEnv", "NE3_ACTION_BOUND"]
 
@@ -82,7 +83,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
+    finite (as ``tracking_v0``: ``termination_reason`` 2, cleaned terminal
     observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
@@ -92,7 +93,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     ## Info
 
     Per agent: ``estimation_error`` of its node, ``tracking_error`` (= ``||x||``),
-    ``gamma``, ``gamma_s`` of its node.
+    ``gamma``, ``gamma_s`` of its node, ``termination_reason`` (integer code, as ``tracking_v0``).
 
     ## Arguments
 
@@ -100,7 +101,8 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
     R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0)`` (:class:`~dobs_envs.envs.options.EnvOptions`; see
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False)``
+    (:class:`~dobs_envs.envs.options.EnvOptions`; see
     ``tracking_v0`` for the shared ones). ``scenario=`` accepts any Scenario with an unknown
     input ``B_v``.
 
@@ -109,7 +111,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}
 
     @classmethod
     def _default_scenario(cls, opts):

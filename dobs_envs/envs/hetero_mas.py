@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
-from .options import HeteroMASOptions
+from .options import RENDER_MODES, HeteroMASOptions
 
 __all__ = ["HeteroMASEnv", "NE1_ACTION_BOUND", "Disagreement"]
 
@@ -71,7 +71,7 @@ class HeteroMASEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
+    finite (as ``tracking_v0``: ``termination_reason`` 2, cleaned terminal
     observations); truncated after ``max_cycles``
     (default 600 control steps = NE1's 30 s).
     On termination the reward of that step also charges the cost of staying on the
@@ -83,7 +83,8 @@ class HeteroMASEnv(DObsParallelEnv):
 
     Per agent: ``estimation_error`` of its node, ``tracking_error`` (``||x||``),
     ``disagreement`` (``||p - pbar 1||``, the rendezvous error, also plotted by
-    ``render()``), ``gamma``, ``gamma_s``.
+    ``render()``), ``gamma``, ``gamma_s``, ``termination_reason`` (integer code, as
+    ``tracking_v0``).
 
     ## Arguments
 
@@ -91,18 +92,20 @@ class HeteroMASEnv(DObsParallelEnv):
     horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
     action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0, q_rest=0.1, r=1.0, rho=1e-3)``
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False, q_rest=0.1,
+    r=1.0, rho=1e-3)``
     (:class:`~dobs_envs.envs.options.HeteroMASOptions`; the disturbance options do not
     apply: NE1 has no unknown input); ``q_rest``, ``r``, ``rho`` parametrise the task
     (:func:`~dobs_envs.scenarios.mas_tasks.rendezvous_scenario`); ``scenario=``
-    takes any multi-agent Scenario (``mas_agents``).
+    takes any multi-agent Scenario (``mas_agents``). ``normalized_actions`` /
+    ``padded_observations``: identical agent spaces for parameter sharing (see ``tracking_v0``).
 
     ## Version History
 
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}
     Options = HeteroMASOptions
     TASK_ERROR_LABEL = r"$\|p - \bar p\,1\|$"
     _TASK_KEYS = ("q_rest", "r", "rho")

@@ -41,6 +41,13 @@ name           size             content
 Presets: ``"local"`` = ``(y, xhat, neighbors, mask, r)`` (``r`` only with a
 reference), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s, v, time)``
 (each only where it exists).
+
+Padded observations (option ``padded_observations=True``, ``FeatureLayout(..., padded=True)``):
+every agent observes ``2 W`` values, ``W`` the widest agent's width: its own observation
+followed by zeros up to ``W``, then the component ``obs_mask`` (``W`` entries, 1 where the entry
+is real, 0 for padding). The gathers point the padding at the constant 0 and the mask at the
+constants 1/0 of ``f``, so the compiled step writes the mask itself; every agent gets the same
+bounds (the union over the agents, see :meth:`FeatureLayout.bounds`), hence identical spaces.
 """
 from __future__ import annotations
 
@@ -90,9 +97,11 @@ class FeatureLayout:
     links : (K,) linked observer node per controller node.
     channel_slices : per controller node, its columns of ``u`` (and ``r``).
     components : tuple of selected component names.
+    padded : every agent observes its observation zero-padded to the widest agent's width ``W``
+        followed by the ``obs_mask`` component (``W`` entries, 1 = real entry); see module doc.
     """
 
-    def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components):
+    def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components, padded: bool = False):
         N = len(p)
         self.N, self.n, self.m, self.m_v = N, n, m, m_v
         pos = 0
@@ -151,6 +160,17 @@ class FeatureLayout:
                 parts.append(idx)
             self.agent_index.append(np.concatenate(parts) if parts else np.zeros(0, dtype=np.intp))
             self.agent_layout.append(layout)
+        #: true width of every agent's own observation (without padding and mask)
+        self.feature_widths = np.array([ix.size for ix in self.agent_index], dtype=np.intp)
+        self.padded = bool(padded)
+        if self.padded:
+            W = int(self.feature_widths.max()) if len(self.feature_widths) else 0
+            for k, ix in enumerate(self.agent_index):
+                w = ix.size
+                pad = np.full(W - w, self.zero, dtype=np.intp)
+                mask = np.array([self.one] * w + [self.zero] * (W - w), dtype=np.intp)
+                self.agent_index[k] = np.concatenate([ix, pad, mask])
+                self.agent_layout[k]["obs_mask"] = slice(W, 2 * W)
         self.all_index = np.concatenate(self.agent_index)
         #: true observation width of every agent (K,) and the padded width D
         self.widths = np.array([ix.size for ix in self.agent_index], dtype=np.intp)
@@ -192,8 +212,28 @@ class FeatureLayout:
                         + list(p_i), dtype=np.int64)
 
     def bounds(self, k: int, dtype):
-        """``(low, high)`` of agent ``k``'s observation (mask entries in [0, 1], the rest unbounded)."""
-        L = self.agent_index[k].size
+        """``(low, high)`` of agent ``k``'s observation (mask entries in [0, 1], the rest unbounded).
+
+        Padded layouts: the same bounds for every agent, the element-wise union over the agents
+        of their own bounds, padding entries counted as exactly 0 (so every agent's padded
+        observation lies in it); ``obs_mask`` in [0, 1].
+        """
+        if not self.padded:
+            return self._own_bounds(k, dtype)
+        W = int(self.feature_widths.max())
+        low = np.full(2 * W, np.inf, dtype=dtype)
+        high = np.full(2 * W, -np.inf, dtype=dtype)
+        for j, w in enumerate(self.feature_widths):
+            lo, hi = self._own_bounds(j, dtype)
+            np.minimum(low[:w], lo, out=low[:w])
+            np.maximum(high[:w], hi, out=high[:w])
+            np.minimum(low[w:W], 0, out=low[w:W])
+            np.maximum(high[w:W], 0, out=high[w:W])
+        low[W:], high[W:] = 0.0, 1.0
+        return low, high
+
+    def _own_bounds(self, k: int, dtype):
+        L = int(self.feature_widths[k])
         low = np.full(L, -np.inf, dtype=dtype)
         high = np.full(L, np.inf, dtype=dtype)
         lay = self.agent_layout[k]

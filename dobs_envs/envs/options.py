@@ -28,8 +28,8 @@ __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", 
 REWARDS = ("quadratic", "log", "sqrt")
 #: unknown-input signals of the ``disturbance`` option
 DISTURBANCES = ("exosystem", "random", "none")
-#: render modes of every environment
-RENDER_MODES = ("rgb_array",)
+#: render modes of every environment ("human": a live matplotlib window, see dobs_envs.envs.rendering)
+RENDER_MODES = ("human", "rgb_array")
 
 _NUM = (int, float, np.integer, np.floating)
 
@@ -76,11 +76,25 @@ class EnvOptions:
     cost_scale : float
         Error norm ``c0 = lambda_max(Q) cost_scale^2`` of the log reward.
     render_mode : str, optional
-        ``None`` or ``"rgb_array"``.
+        ``None``, ``"rgb_array"`` (``render()`` returns the error plot as an image) or ``"human"``
+        (a live matplotlib window of the error plot, redrawn by ``reset``/``step``; on a machine
+        without a display one warning and nothing shown).
     disturbance : str
         ``"exosystem"``, ``"random"`` or ``"none"`` (systems with an unknown input only).
     disturbance_amplitude : float
         Bound of the ``"random"`` disturbance.
+    normalized_actions : bool
+        Every agent's action space is ``Box(-1, 1, (M,), float32)``, ``M`` the largest number of
+        input channels of any agent: entry ``j < m_k`` of agent ``k``'s action is mapped onto
+        its channel's bound (``u = a * action_bound``, out-of-range values clipped), entries
+        ``j >= m_k`` are ignored. The centralised views (``gym.make``, ``gym.make_vec``) then
+        take ``Box(-1, 1, (m,))`` (all inputs stacked, each scaled by its bound; no padding).
+    padded_observations : bool
+        Every agent observes ``2 W`` values (``W`` the widest agent observation): its own
+        observation zero-padded to ``W``, then a 0/1 mask of ``W`` entries (1 = real entry;
+        component ``"obs_mask"`` of ``observation_layout``), with the same bounds for every
+        agent. With ``normalized_actions`` every agent has identical spaces: one shared policy
+        (parameter sharing in SuperSuit, RLlib, BenchMARL, TorchRL) needs no wrapper.
     """
 
     scenario: Any = None
@@ -101,6 +115,8 @@ class EnvOptions:
     render_mode: str | None = None
     disturbance: str = "exosystem"
     disturbance_amplitude: float = 2.0
+    normalized_actions: bool = False
+    padded_observations: bool = False
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -201,6 +217,10 @@ class EnvOptions:
         if not (_is_num(amp) and math.isfinite(amp) and amp >= 0):
             raise ValueError(f"disturbance_amplitude must be finite and >= 0, got {amp!r}")
         set_("disturbance_amplitude", float(amp))
+        for name in ("normalized_actions", "padded_observations"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+            set_(name, bool(getattr(self, name)))
 
 
 @dataclass(frozen=True, eq=False)

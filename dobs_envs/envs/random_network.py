@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from .base import DObsParallelEnv
-from .options import RandomNetworkOptions
+from .options import RENDER_MODES, RandomNetworkOptions
 
 __all__ = ["RandomNetworkEnv"]
 
@@ -75,8 +75,9 @@ class RandomNetworkEnv(DObsParallelEnv):
     ## Episode End
 
     Terminated when ``||x|| > state_bound`` (1e3) or the simulated state is not
-    finite (as ``tracking_v0``: reason ``"non_finite_state"``, cleaned terminal
-    observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
+    finite (as ``tracking_v0``: ``termination_reason`` 2 ``non_finite_state``, cleaned
+    terminal observations); truncated after ``max_cycles`` (default 400 control steps = 20 s).
+    Infos as ``tracking_v0`` (numeric, the same keys from ``reset`` on).
     On termination the reward of that step also charges the cost of staying on the
     bound for the rest of the horizon, ``lambda_max(Q) * state_bound^2 * period`` per
     remaining control step (``termination_penalty=False`` disables it), so ending an
@@ -88,18 +89,22 @@ class RandomNetworkEnv(DObsParallelEnv):
     observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
     init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic",
     cost_scale=0.1, render_mode=None, disturbance="exosystem", disturbance_amplitude=2.0,
-    kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
+    normalized_actions=False, padded_observations=False, kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
     graph="random", edge_prob=0.3, unknown_input=False, controller=None,
     generator_kwargs=None)`` (:class:`~dobs_envs.envs.options.RandomNetworkOptions`;
     common options as ``tracking_v0``, the disturbance options with ``unknown_input=True``;
     ``scenario=`` is not accepted here: use ``dobs_envs.envs.make_parallel_env(scenario)``).
+    The agents' observation widths differ (their nodes measure different outputs; with
+    ``generator_kwargs={"inputs_per_controller": (1, 2)}`` their channel widths too):
+    ``normalized_actions=True, padded_observations=True`` give them identical spaces for a
+    shared policy (see ``tracking_v0``).
 
     ## Version History
 
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}
     Options = RandomNetworkOptions
     REJECT_OPTIONS = ("scenario",)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import DObsParallelEnv
+from .options import RENDER_MODES
 
 __all__ = ["TrackingEnv", "NE2_ACTION_BOUND"]
 
@@ -82,8 +83,8 @@ class TrackingEnv(DObsParallelEnv):
 
     Terminated when ``||x|| > state_bound`` (1e3) or any simulated quantity
     (``x``, ``x_r``, the observer states ``z``, ``gamma``, ``gamma_s``, ``v``) is
-    not finite (``info[agent]["termination_reason"]`` = ``"state_bound_exceeded"`` /
-    ``"non_finite_state"``). The terminal step's observations and ``state()`` are
+    not finite (``info[agent]["termination_reason"]`` = 1 ``state_bound_exceeded`` /
+    2 ``non_finite_state``). The terminal step's observations and ``state()`` are
     cleaned (NaN -> 0, +-inf -> +-largest finite value of ``obs_dtype``), a non-finite
     step cost is replaced by the cost of one step on the bound, and ``info`` keeps the
     raw diagnostics (errors and gains may be NaN/inf).
@@ -96,8 +97,11 @@ class TrackingEnv(DObsParallelEnv):
 
     ## Info
 
-    Per agent: ``estimation_error`` ``||xhat_i - x||`` of its linked node,
-    ``tracking_error`` ``||x - x_r||``, and that node's ``gamma``, ``gamma_s``.
+    Per agent, the same numeric keys from ``reset`` on: ``estimation_error``
+    ``||xhat_i - x||`` of its linked node, ``tracking_error`` ``||x - x_r||``, that node's
+    ``gamma``, ``gamma_s``, and the integer ``termination_reason``: 0 none (the episode goes
+    on), 1 state_bound_exceeded, 2 non_finite_state, 3 horizon (truncated after
+    ``max_cycles``) (:data:`dobs_envs.envs.core.REASONS`).
 
     ## Arguments
 
@@ -105,7 +109,8 @@ class TrackingEnv(DObsParallelEnv):
     horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
     action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0)`` (the fields of :class:`~dobs_envs.envs.options.EnvOptions`,
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False)``
+    (the fields of :class:`~dobs_envs.envs.options.EnvOptions`,
     which validates them; the same keywords for ``gym.make``/``gym.make_vec`` of
     ``dobs_envs/Tracking-v0`` except ``max_cycles``/``horizon``, there
     ``max_episode_steps``).
@@ -117,6 +122,18 @@ class TrackingEnv(DObsParallelEnv):
     ``scenario=`` replaces NE2 by any Scenario with a reference signal.
     ``disturbance``/``disturbance_amplitude`` apply to systems with an unknown input only
     (NE2 has none: other values raise ``ValueError``).
+    ``normalized_actions=True`` gives every agent the action space ``Box(-1, 1, (M,), float32)``,
+    ``M`` the largest number of input channels of any agent (here 1): entry ``j < m_k`` is
+    mapped onto channel ``k``'s bound (``u = a * b``), entries ``j >= m_k`` are ignored
+    (the centralised ``gym.make`` view then takes ``Box(-1, 1, (m,))``).
+    ``padded_observations=True`` gives every agent the observation ``[o_k, 0...0 | mask]``:
+    its own observation zero-padded to the widest agent's width ``W``, then ``W`` mask
+    entries (1 = real, 0 = padding; component ``"obs_mask"`` of ``observation_layout``),
+    with the same bounds for every agent. Use both when one policy is shared by all agents
+    (parameter sharing in SuperSuit, RLlib, BenchMARL MAPPO/IPPO, TorchRL): every agent then
+    has identical spaces, which these libraries require, and ``[-1, 1]`` actions suit their
+    Gaussian policies. Leave them off for per-agent policies that know their own bounds
+    and widths (the defaults are the agents' true spaces).
     Unknown arguments raise ``TypeError`` listing the valid ones.
 
     ## Version History
@@ -124,7 +141,7 @@ class TrackingEnv(DObsParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
 
     @classmethod
     def _default_scenario(cls, opts):

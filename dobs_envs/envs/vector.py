@@ -17,10 +17,12 @@ observations, rewards and episodes for the same seed (tested bit for bit).
 - **Seeding**: ``reset(seed=s)`` seeds copy ``c`` with ``s + c`` (a list seeds each copy);
   autoresets draw from the copy's own generator, so seeded runs are reproducible.
   ``reset(options={"reset_mask": mask})`` resets only the masked copies.
-- **Infos** (arrays over the copies, each with its ``"_<key>"`` mask): ``tracking_error (B,)``,
-  ``estimation_errors (B, N)``, ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g.
-  ``disagreement``), and ``termination_reason (B,)`` int8 codes of
-  :data:`~dobs_envs.envs.core.REASONS` (mask: the copies that ended).
+- **Infos** (the same keys from ``reset`` on, numeric arrays over the copies, each with its
+  ``"_<key>"`` mask, all True): ``tracking_error (B,)``, ``estimation_errors (B, N)``,
+  ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g. ``disagreement``), and
+  ``termination_reason (B,)`` int8 codes of :data:`~dobs_envs.envs.core.REASONS` (0 none,
+  1 state_bound_exceeded, 2 non_finite_state, 3 horizon; 0 for copies still running or
+  just reset).
 - ``threads`` (default: one per CPU core) advance disjoint ranges of at least 128 copies
   concurrently (the compiled step releases the GIL; same results for any number of threads).
 """
@@ -35,6 +37,8 @@ from gymnasium.vector.vector_env import AutoresetMode
 
 from ..registry import ENVIRONMENTS, EnvEntry
 from .centralized import reject_horizon_options, central_spaces
+from .options import RENDER_MODES
+from .rendering import LivePlot
 
 __all__ = ["DObsVectorEnv"] + [f"make_vec_{name}" for name in ENVIRONMENTS]
 
@@ -51,7 +55,7 @@ class DObsVectorEnv(VectorEnv):
     **kwargs : the options of ``env_class``
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 20}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": list(RENDER_MODES), "render_fps": 20}
 
     def __init__(self, env_class, num_envs: int = 1, *, max_episode_steps: int | None = None, threads: int | None = None,
                  **kwargs):
@@ -68,6 +72,7 @@ class DObsVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._cat = c.layout.concat_index
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._live = None  # render_mode="human": copy 0's live window
 
     def reset(self, *, seed=None, options: dict | None = None):
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
@@ -86,12 +91,16 @@ class DObsVectorEnv(VectorEnv):
             seeds = [seeds[r] for r in rows]
         self.core.reset(rows, seeds, options)
         self._autoreset[rows] = False
-        return self._obs(), self._infos(None)
+        if self.render_mode == "human":
+            self._show(force=True)
+        return self._obs(), self._infos(np.zeros(B, dtype=np.int8))
 
     def step(self, actions):
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape} (copies, inputs), got {a.shape}")
+        if self.core.normalized_actions:
+            a = a * self.core.action_scale
         again = self._autoreset
         if again.any():
             a = a.copy()
@@ -103,6 +112,8 @@ class DObsVectorEnv(VectorEnv):
             self.core.reset(rows)
             rew[rows], term[rows], trunc[rows], reason[rows] = 0.0, False, False, 0
         self._autoreset = term | trunc
+        if self.render_mode == "human":
+            self._show(force=bool(self._autoreset[0]))
         return self._obs(), rew, term, trunc, self._infos(reason)
 
     def _obs(self) -> np.ndarray:
@@ -115,23 +126,34 @@ class DObsVectorEnv(VectorEnv):
                 "gamma": c.gamma.copy(), "gamma_s": c.gamma_s.copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = np.array(c.task_errors(), dtype=np.float64)
+        info["termination_reason"] = reason
         for k in list(info):
             info[f"_{k}"] = np.ones(B, dtype=bool)
-        if reason is not None:
-            info["termination_reason"] = reason
-            info["_termination_reason"] = reason != 0
         return info
 
     def render(self):
-        """Copy 0's error plot (``render_mode="rgb_array"``)."""
+        """Copy 0's error plot: an RGB image (``render_mode="rgb_array"``), or the live window redrawn
+        (``"human"``; ``reset``/``step`` redraw it too) and None."""
         if self.render_mode is None or self.core.history is None:
+            return None
+        if self.render_mode == "human":
+            self._show(force=True)
             return None
         from .rendering import error_plot
 
         t, te, ee = self.core.history
         return error_plot(np.asarray(t), np.asarray(te), np.asarray(ee), title=self.metadata["name"])
 
+    def _show(self, force: bool) -> None:
+        if self.core.history is None:
+            return
+        if self._live is None:
+            self._live = LivePlot(self.metadata["name"], fps=self.metadata["render_fps"])
+        self._live.update(*self.core.history, force=force)
+
     def close_extras(self, **kwargs):
+        if self._live is not None:
+            self._live.close()
         self.core.close()
 
 
