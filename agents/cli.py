@@ -124,7 +124,7 @@ def _interrupted(out: str, exc: KeyboardInterrupt) -> None:
     else:
         try:
             resume_point(out)
-            msg = f"aborted; resume from the last checkpoint with: dobs-envs train --resume {out}"
+            msg = f"aborted; resume from the run's last save with: dobs-envs train --resume {out}"
         except (RunDirError, OSError):
             msg = "aborted before anything was saved"
     print(f"dobs-envs: {msg}", file=sys.stderr)

@@ -222,15 +222,20 @@ class TrainingInterrupted(KeyboardInterrupt):
 
 class _StopOnSigint:
     """Context manager: the first SIGINT asks training to stop at the next environment step
-    (:meth:`callback` then returns False, SB3 ends ``learn()`` cleanly); a second SIGINT raises
-    ``KeyboardInterrupt`` at once. Installed only in the main thread and over Python's default
-    handler (a process that ignores SIGINT, such as a benchmark worker, keeps ignoring it)."""
+    (:meth:`callback` then returns False, SB3 ends ``learn()`` cleanly); a second SIGINT during
+    training raises ``KeyboardInterrupt`` at once; once ``saving`` is set (the final save, well
+    under a second) SIGINT is ignored, so no save is cut short. Installed only in the main thread
+    and over Python's default handler (a process that ignores SIGINT, such as a benchmark worker,
+    keeps ignoring it)."""
 
     def __init__(self):
         self.requested = False
+        self.saving = False
         self._installed = False
 
     def _handler(self, signum, frame):
+        if self.saving:
+            return
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -379,9 +384,10 @@ def _learn(model, venv, config: dict, out: str, *, progress: bool, callbacks: li
     config.update(status=RUNNING, timesteps_done=start // n_agents, sb3_timesteps=start)
     _write_json(os.path.join(out, "config.json"), config)  # a run killed outright resumes from its checkpoints
     t0 = time.perf_counter()
-    with _StopOnSigint() as stop:  # kept through the saves: a first Ctrl-C never tears a file
+    with _StopOnSigint() as stop:  # kept through the saves: no Ctrl-C cuts them short
         model.learn(total_timesteps=sb3_steps - start, callback=CallbackList(callbacks + [stop.callback()]),
                     tb_log_name=f"{algo}{'_ma' if multi_agent else ''}", reset_num_timesteps=start == 0)
+        stop.saving = True
         seconds = previous_seconds + time.perf_counter() - t0
         done = int(model.num_timesteps)
         interrupted = stop.requested and done < sb3_steps
@@ -432,8 +438,9 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     In the main thread, a SIGINT (Ctrl-C) stops training at the next environment step, saves
     ``model.zip``, ``vecnormalize.pkl`` (and an off-policy replay buffer, ``replay_buffer.pkl``)
     and ``config.json`` with ``status: "interrupted"`` and ``timesteps_done``, then raises
-    :class:`TrainingInterrupted`; :func:`resume` continues the run. A second SIGINT aborts at
-    once (``config.json`` stays ``"running"``; :func:`resume` starts from the last checkpoint).
+    :class:`TrainingInterrupted`; :func:`resume` continues the run. A second SIGINT before the
+    save aborts at once (``config.json`` stays ``"running"``; :func:`resume` starts from the last
+    checkpoint); during the save (well under a second) SIGINT is ignored.
     """
     algo = algo.lower()
     if multi_agent and algo not in MULTI_AGENT_ALGOS:

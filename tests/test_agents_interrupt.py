@@ -198,18 +198,33 @@ def test_sac_interrupt_keeps_the_replay_buffer(tmp_path):
 
 
 def test_second_sigint_aborts_at_once(tmp_path):
+    """Two SIGINTs during training (sent by the process to itself, from a callback, so that the
+    second one surely arrives before the stop): no save, config.json stays 'running', the run
+    resumes from its last checkpoint, and the default SIGINT handler is back."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from agents.train import TrainingInterrupted, train
+
+    class TwoSigints(BaseCallback):
+        survived_first = False
+
+        def _on_step(self):
+            if self.num_timesteps > 2 * CKPT:  # after the second checkpoint (2 copies: 2 steps per call)
+                os.kill(os.getpid(), signal.SIGINT)  # asks for a stop ...
+                self.survived_first = True
+                os.kill(os.getpid(), signal.SIGINT)  # ... and aborts at once
+            return True
+
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     out = str(tmp_path / "abort")
-    proc = _train_child(out)
-    _wait_for(lambda: _checkpoints(out), proc)
-    proc.send_signal(signal.SIGINT)
-    proc.send_signal(signal.SIGINT)
-    _, stderr = proc.communicate(timeout=300)
-    assert proc.returncode == 130
-    err = _one_line(stderr)
-    # either the first SIGINT already finished saving, or the second aborted it; both say how to go on
-    assert "--resume" in err
-    if "aborted" in err:
-        assert _config(out)["status"] == "running"
+    cb = TwoSigints()
+    with pytest.raises(KeyboardInterrupt) as exc:
+        train("tracking", timesteps=BUDGET, checkpoint_freq=CKPT, out=out, progress=False,
+              hyperparams=json.loads(PPO_HP), callbacks=[cb])
+    assert cb.survived_first and not isinstance(exc.value, TrainingInterrupted)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert _config(out)["status"] == "running" and not os.path.exists(os.path.join(out, "model.zip"))
+    assert resume_point(out).sb3_timesteps == 2 * CKPT
 
 
 def _children(pid: int) -> set[int]:
