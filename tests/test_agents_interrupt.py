@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from agents.benchmark import BUDGETS
-from agents.train import resume, resume_point
+from agents.train import RunDirError, read_run_config, resume, resume_point
 from dobs_envs.cli import main
 
 TINY_PPO = BUDGETS["tiny"]["hyperparams"]["ppo"]
@@ -168,6 +168,8 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     proc.kill()
     proc.communicate()
     assert _config(out)["status"] == "running" and not os.path.exists(os.path.join(out, "model.zip"))
+    with pytest.raises(RunDirError, match="model.zip is missing.*--resume.*checkpoint"):
+        read_run_config(out)  # what evaluate says about it
     point = resume_point(out)
     latest = max(_checkpoints(out), key=lambda f: int(f.split("_")[1]))
     assert os.path.basename(point.model) == latest and point.sb3_timesteps == int(latest.split("_")[1])
