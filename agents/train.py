@@ -28,6 +28,7 @@ import re
 import signal
 import threading
 import time
+import zipfile
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -484,8 +485,9 @@ class ResumePoint:
 
 def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
     """Where :func:`resume` continues the run in ``path``: the later of ``model.zip`` (saved on an
-    interrupt; ``config.json`` ``model_sb3_timesteps``) and the last checkpoint. Raises
-    :class:`RunDirError` for a complete run or one with no save."""
+    interrupt; ``config.json`` ``model_sb3_timesteps``) and the last complete checkpoint (a valid
+    zip, with its normaliser when the run normalises). Raises :class:`RunDirError` for a complete
+    run or one with no save."""
     cfg = read_run_config(path, require_model=False) if cfg is None else cfg
     total = int(cfg.get("timesteps", 0)) * int(cfg.get("n_agents", 1))
     status = cfg.get("status", COMPLETE)
@@ -506,13 +508,13 @@ def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
             n = int(m["steps"])
             vn = os.path.join(ck, f"{cfg['algo']}_vecnormalize_{n}_steps.pkl") if norm else None
             points.append(ResumePoint(os.path.join(ck, f), vn, None, n))
-    if not points:
-        raise RunDirError(f"{path!r} has nothing to resume from (no model.zip of an interrupted run, no "
-                          f"checkpoints/{cfg['algo']}_<steps>_steps.zip)")
-    best = max(points, key=lambda p: (p.sb3_timesteps, p.replay_buffer is not None))
-    if best.vecnormalize is not None and not os.path.isfile(best.vecnormalize):
-        raise RunDirError(f"{best.model} has no normaliser ({best.vecnormalize} is missing)")
-    return best
+    # a kill can cut a checkpoint short: SB3 writes the model, then the normaliser, in place
+    complete = [p for p in points if zipfile.is_zipfile(p.model)
+                and (p.vecnormalize is None or os.path.isfile(p.vecnormalize))]
+    if not complete:
+        raise RunDirError(f"{path!r} has nothing to resume from (no model.zip of an interrupted run, no complete "
+                          f"checkpoints/{cfg['algo']}_<steps>_steps.zip" + (" with its normaliser)" if norm else ")"))
+    return max(complete, key=lambda p: (p.sb3_timesteps, p.replay_buffer is not None))
 
 
 def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose: int = 0,

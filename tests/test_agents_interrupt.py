@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import shutil
 import signal
 import subprocess
 import sys
@@ -159,7 +160,7 @@ class _AtStart:
 
 
 def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
-    """SIGKILL (no chance to save): config.json says running, resume takes the latest checkpoint."""
+    """SIGKILL (no chance to save): config.json says running, resume takes the latest complete checkpoint."""
     from stable_baselines3 import PPO
 
     out = str(tmp_path / "killed")
@@ -170,16 +171,33 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     assert _config(out)["status"] == "running" and not os.path.exists(os.path.join(out, "model.zip"))
     with pytest.raises(RunDirError, match="model.zip is missing.*--resume.*checkpoint"):
         read_run_config(out)  # what evaluate says about it
+    ck = os.path.join(out, "checkpoints")
+    zip_of, norm_of = (lambda n: os.path.join(ck, f"ppo_{n}_steps.zip")), \
+        (lambda n: os.path.join(ck, f"ppo_vecnormalize_{n}_steps.pkl"))
+    # the kill may have cut the last checkpoint short (SB3 writes the model, then the normaliser)
+    last = max(int(f.split("_")[1]) for f in _checkpoints(out) if os.path.exists(norm_of(f.split("_")[1])))
+    # later but incomplete checkpoints, as a kill leaves them, are not taken: a truncated zip,
+    # an empty one (both with a normaliser), a whole zip without its normaliser
+    with open(zip_of(last), "rb") as fh:
+        whole = fh.read()
+    for n, data, norm in [(10**6, whole[:1000], True), (10**6 + 2, b"", True), (10**6 + 4, whole, False)]:
+        with open(zip_of(n), "wb") as fh:
+            fh.write(data)
+        if norm:
+            shutil.copy(norm_of(last), norm_of(n))
     point = resume_point(out)
-    latest = max(_checkpoints(out), key=lambda f: int(f.split("_")[1]))
-    assert os.path.basename(point.model) == latest and point.sb3_timesteps == int(latest.split("_")[1])
+    assert point.model == zip_of(last) and point.sb3_timesteps == last
+    for n in (10**6, 10**6 + 2, 10**6 + 4):
+        for f in (zip_of(n), norm_of(n)):
+            if os.path.exists(f):
+                os.remove(f)
     spy = _AtStart()
     res = resume(out, progress=False, callbacks=[spy])
     steps, params = spy.start
     assert steps == point.sb3_timesteps
     np.testing.assert_array_equal(params, _params(PPO.load(point.model, device="cpu")))
     assert res.config["status"] == "complete" and BUDGET <= res.config["timesteps_done"] < BUDGET + 128
-    assert res.config["resumes"][0]["from"] == os.path.join("checkpoints", latest)
+    assert res.config["resumes"][0]["from"] == os.path.relpath(zip_of(last), out)
 
 
 def test_sac_interrupt_keeps_the_replay_buffer(tmp_path):
