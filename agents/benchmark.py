@@ -36,6 +36,7 @@ import csv
 import json
 import multiprocessing
 import os
+import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -107,6 +108,28 @@ CURVE_SEED = 20_000  # learning-curve episodes use seeds CURVE_SEED + k (disjoin
 
 
 # ---------------------------------------------------------------------- one training run (worker process)
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C reaches the whole process group; the main process alone handles it
+    (and terminates the workers), so workers print no tracebacks and start no new job."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _terminate_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued jobs and end the running ones (their runs have no result.json, so the next
+    invocation trains them again; finished runs are kept)."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    terminate = getattr(pool, "terminate_workers", None)  # Python >= 3.14
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    if terminate is not None:
+        terminate()
+    else:
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+    for proc in procs:
+        proc.join(timeout=10)
+
+
 def _run_signature(spec: dict) -> dict:
     return {k: spec[k] for k in ("env", "agent", "seed", "steps", "hp", "env_kwargs", "eval_seeds", "curve_seeds",
                                  "curve_every")}
@@ -398,7 +421,8 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
         bar = tqdm(total=len(specs), desc=f"train+evaluate ({n_workers} workers)", unit="run")
     if n_workers > 1 and len(specs) > 1:
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
+        pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_ignore_sigint)
+        try:
             futs = {pool.submit(_train_and_evaluate, sp): sp for sp in specs}
             analytic = {e: _analytic_results(e, env_kwargs, eval_seed, episodes) for e in env_names}
             for f in as_completed(futs):
@@ -406,6 +430,10 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                 results[(sp["env"], sp["agent"], sp["seed"])] = f.result()
                 if bar is not None:
                     bar.update(1)
+        except BaseException:  # Ctrl-C (or a failed job): no worker outlives the benchmark
+            _terminate_workers(pool)
+            raise
+        pool.shutdown()
     else:
         analytic = {e: _analytic_results(e, env_kwargs, eval_seed, episodes) for e in env_names}
         for sp in specs:

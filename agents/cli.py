@@ -15,17 +15,19 @@ __all__ = ["add_parser"]
 
 def add_parser(sub) -> None:
     p = sub.add_parser("train", help="train an SB3 agent (PPO/SAC/TD3; shared PPO/SAC with --multi-agent)")
-    p.add_argument("--env", default="tracking",
-                   help="tracking | disturbance_rejection | hetero_mas | random_network, or a Gymnasium id")
-    p.add_argument("--algo", choices=ALGOS, default="ppo")
-    p.add_argument("--multi-agent", action="store_true",
+    # defaults of the run's identity are None here (applied in _train) so that --resume can tell
+    # which options were given and check them against the run's config
+    p.add_argument("--env", default=None,
+                   help="tracking (default) | disturbance_rejection | hetero_mas | random_network, or a Gymnasium id")
+    p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3")
+    p.add_argument("--multi-agent", action="store_true", default=None,
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
     p.add_argument("--timesteps", type=_positive_int, default=None,
                    help="environment steps (multi-agent: SB3 sees one sample per agent); default from the YAML")
     p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
                    help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
                         "by behaviour cloning of the paper's controller (centralised PPO)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=None, help="training seed (default 0)")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
@@ -34,6 +36,9 @@ def add_parser(sub) -> None:
     p.add_argument("--hyperparams", type=_json_object, default=None,
                    help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
     p.add_argument("--overwrite", action="store_true", help="replace an existing run in --out")
+    p.add_argument("--resume", default=None, metavar="DIR",
+                   help="continue the interrupted run in DIR from its last save (model.zip after Ctrl-C, else the "
+                        "last checkpoint) with the run's own configuration")
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept --env 'package.module:factory' (imports that code)")
     p.add_argument("--no-progress", action="store_true")
@@ -41,7 +46,8 @@ def add_parser(sub) -> None:
     p.set_defaults(func=_train)
 
     p = sub.add_parser("evaluate", help="evaluate a trained run directory on seeded episodes")
-    p.add_argument("--model", required=True, help="run directory (or its model.zip)")
+    p.add_argument("--model", required=True,
+                   help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip)")
     p.add_argument("--episodes", type=_positive_int, default=10)
     p.add_argument("--seed", type=int, default=10_000, help="episode k is reset with seed + k")
     p.add_argument("--json", default=None, help="also write the summary to this file")
@@ -102,19 +108,60 @@ _nonnegative_int = _int_at_least(0, "an integer >= 0")
 _positive_int = _int_at_least(1, "a positive integer")
 
 
+#: the options that define a run (argparse dest, option, config.json key); --resume checks them
+_RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_agent", "--multi-agent", "multi_agent"),
+                ("hybrid", "--hybrid", "hybrid"), ("seed", "--seed", "seed"), ("timesteps", "--timesteps", "timesteps"),
+                ("checkpoint_freq", "--checkpoint-freq", "checkpoint_freq"))
+
+
+def _interrupted(out: str, exc: KeyboardInterrupt) -> None:
+    """One line on stderr after Ctrl-C, exit status 130 (128 + SIGINT)."""
+    from .train import RunDirError, TrainingInterrupted, resume_point
+
+    if isinstance(exc, TrainingInterrupted):
+        msg = (f"interrupted after {exc.timesteps_done} of {exc.timesteps} env steps; model, normaliser and config "
+               f"saved in {out}; resume with: dobs-envs train --resume {out}")
+    else:
+        try:
+            resume_point(out)
+            msg = f"aborted; resume from the run's last save with: dobs-envs train --resume {out}"
+        except (RunDirError, OSError):
+            msg = "aborted before anything was saved"
+    print(f"dobs-envs: {msg}", file=sys.stderr)
+    raise SystemExit(130)
+
+
+def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
+    """Keys of ``given`` (hyperparameter overrides) whose values differ from the run's ``stored`` ones."""
+    diff = []
+    for k, v in given.items():
+        if isinstance(v, dict) and isinstance(stored.get(k), dict):
+            diff += _hp_subset(v, stored[k], f"{prefix}{k}.")
+        elif k not in stored or stored[k] != v:
+            diff.append(f"{prefix}{k}={json.dumps(v)} (the run has {json.dumps(stored.get(k))})")
+    return diff
+
+
 def _train(args) -> int:
     from .config import EnvNameError, check_env_name
     from .train import default_run_dir, train
 
+    if args.resume is not None:
+        return _resume(args)
+    args.algo = args.algo or "ppo"
+    args.seed = 0 if args.seed is None else args.seed
+    args.multi_agent = bool(args.multi_agent)
     try:
-        env = check_env_name(args.env, multi_agent=args.multi_agent, allow_custom=args.allow_custom_env, what="--env")
+        env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
+                             what="--env")
     except EnvNameError as exc:
         _usage_error(str(exc))
     out = args.out or default_run_dir(env, args.algo, args.multi_agent, args.seed)
     if os.path.exists(out) and not os.path.isdir(out):
         _usage_error(f"--out {out!r} is a file, not a directory")
     if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
-        _usage_error(f"--out {out!r} already holds a run; pass --overwrite to replace it or choose another --out")
+        _usage_error(f"--out {out!r} already holds a run; pass --overwrite to replace it, --resume {out} to continue "
+                     f"an interrupted run, or choose another --out")
     try:
         res = train(env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
                     out=out, tensorboard=args.tensorboard, progress=not args.no_progress,
@@ -124,8 +171,53 @@ def _train(args) -> int:
         if "unexpected keyword argument" in str(exc):
             _usage_error(f"--hyperparams: {exc}")
         raise
+    except KeyboardInterrupt as exc:
+        _interrupted(out, exc)
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
+    return 0
+
+
+def _resume(args) -> int:
+    """``train --resume DIR``: the run's own configuration; options that define a run must agree with it."""
+    from .config import EnvNameError, env_key
+    from .train import RunDirError, read_run_config, resume, resume_point
+
+    run = args.resume
+    if args.overwrite:
+        _usage_error("--resume continues a run, --overwrite replaces it: give one of them")
+    if args.out is not None and os.path.abspath(args.out) != os.path.abspath(run):
+        _usage_error(f"--out {args.out!r} differs from --resume {run!r} (a resumed run stays in its directory)")
+    try:
+        cfg = read_run_config(run, require_model=False)
+        resume_point(run, cfg)
+    except RunDirError as exc:
+        _usage_error(f"--resume: {exc}")
+    diffs = []
+    for dest, opt, key in _RUN_OPTIONS:
+        given, stored = getattr(args, dest), cfg.get(key)
+        if given is None:
+            continue
+        if dest == "env":
+            given, stored = env_key(given), env_key(str(stored))
+        if given != stored:
+            diffs.append(f"{opt} {given} (the run has {stored})")
+    if args.hyperparams:
+        diffs += [f"--hyperparams {d}" for d in _hp_subset(args.hyperparams, cfg.get("hyperparams") or {})]
+    if diffs:
+        _usage_error(f"--resume {run}: the run's configuration differs: {'; '.join(diffs)} (omit these options to "
+                     f"resume with the run's own, or start a new run in another --out)")
+    try:
+        res = resume(run, progress=not args.no_progress, threads=args.threads, verbose=args.verbose,
+                     tensorboard=args.tensorboard, allow_custom_env=args.allow_custom_env)
+    except EnvNameError as exc:
+        _usage_error(f"--resume: {exc}")
+    except KeyboardInterrupt as exc:
+        _interrupted(run, exc)
+    r = res.config["resumes"][-1]
+    print(f"resumed {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']} "
+          f"from {r['from']} ({r['timesteps_done']} env steps) to {res.config['timesteps']} env steps; "
+          f"{res.seconds:.1f} s of training in all -> {res.path}")
     return 0
 
 
@@ -156,9 +248,14 @@ def _benchmark(args) -> int:
 
     t0 = time.perf_counter()
     agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
-    summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
-                         episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
-                         workers=args.workers, progress=not args.no_progress)
+    try:
+        summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
+                             episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
+                             workers=args.workers, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"dobs-envs: benchmark interrupted; finished runs are kept in {args.out}/models (result.json) and "
+              f"reused when the same command runs again", file=sys.stderr)
+        raise SystemExit(130) from None
     for env, table in summ["tables"].items():
         print()
         print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}, evaluation episodes "

@@ -45,6 +45,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from dobs_envs.envs.base import agent_spaces
+from dobs_envs.linalg.validation import as_numeric
 from dobs_envs.envs.centralized import central_spaces
 
 from .vec_env import SlotEncoder
@@ -110,7 +111,7 @@ class CoreVecEnv(VecEnv):
         return o if self._onehot is None else np.concatenate([o, self._onehot], axis=1)
 
     def _decode(self, actions) -> np.ndarray:
-        a = np.asarray(actions, dtype=np.float64).reshape(self.n_copies, -1)
+        a = np.asarray(as_numeric(actions, "actions"), dtype=np.float64).reshape(self.n_copies, -1)
         if self.shared:
             a = a[:, self._gather]
         if self.rescale_actions:

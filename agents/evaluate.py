@@ -169,6 +169,10 @@ def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True
                    allow_custom_env: bool = False) -> dict:
     """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment.
 
+    ``path`` is a run directory, its ``model.zip`` or one of its checkpoints
+    (``<run>/checkpoints/<algo>_<steps>_steps.zip``, evaluated with the normaliser saved with it);
+    the summary names the model file (``model``).
+
     The environment named in the run's ``config.json`` must be a registered one
     (:func:`agents.config.check_env_name`); a ``module:attr`` name is refused unless
     ``allow_custom_env`` (a file must never make us import code). ``model.zip`` and
@@ -201,8 +205,9 @@ def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True
                 done = term or trunc
             rets.append(R)
         env.close()
-        return {"policy": agent.name, "episodes": episodes, "seeds": list(range(seed, seed + episodes)),
+        return {"policy": agent.name, "model": agent.model_path, "episodes": episodes,
+                "seeds": list(range(seed, seed + episodes)),
                 "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets))}
     res = evaluate_policy(env, pol, episodes, seed, parallel=agent.multi_agent, progress=progress, desc=agent.name)
     env.close()
-    return {"policy": agent.name, **summarise(res)}
+    return {"policy": agent.name, "model": agent.model_path, **summarise(res)}

@@ -13,7 +13,10 @@ one sample per agent, so the SB3 budget is ``timesteps * n_agents``.
 
 A run directory holds ``model.zip``, ``vecnormalize.pkl`` (when observations or
 rewards are normalised), ``config.json`` (everything needed to rebuild the env and
-the policy inputs) and ``checkpoints/``. :func:`load_agent` reads it back.
+the policy inputs; ``status`` running / interrupted / complete and ``timesteps_done``)
+and ``checkpoints/`` (``<algo>_<sb3 steps>_steps.zip`` with its normaliser). :func:`load_agent`
+reads it (or one checkpoint) back. Ctrl-C saves the run as interrupted (:class:`TrainingInterrupted`)
+and :func:`resume` continues it from its last save.
 """
 from __future__ import annotations
 
@@ -21,7 +24,11 @@ import json
 import math
 import os
 import pickle
+import re
+import signal
+import threading
 import time
+import zipfile
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -33,7 +40,8 @@ from .config import ENVS, MULTI_AGENT_ALGOS, env_key, gym_factory, load_hyperpar
 from .core_vec_env import CoreVecEnv
 from .vec_env import ParallelVecEnv, SlotEncoder
 
-__all__ = ["train", "load_agent", "TrainedAgent", "build_vec_env", "core_of", "TqdmCallback", "set_threads"]
+__all__ = ["train", "resume", "resume_point", "load_agent", "TrainedAgent", "TrainingInterrupted", "RunDirError",
+           "read_run_config", "run_files", "build_vec_env", "core_of", "TqdmCallback", "set_threads"]
 
 _ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
 _EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise",
@@ -193,49 +201,116 @@ def default_run_dir(env: str, algo: str, multi_agent: bool, seed: int) -> str:
     return os.path.join("runs", f"{name}_{algo}{'_ma' if multi_agent else ''}_s{seed}")
 
 
-def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int | None = None, seed: int = 0,
-          out: str | None = None, tensorboard: str | None = None, progress: bool = True,
-          checkpoint_freq: int | None = None, hyperparams: dict | None = None, env_kwargs: dict | None = None,
-          threads: int | None = 1, verbose: int = 0, env_name: str | None = None,
-          hybrid: str | None = None, callbacks: list | None = None) -> TrainResult:
-    """Train ``algo`` on ``env`` and save the run directory (see module doc).
+#: ``config.json`` ``status`` of a run directory: written ``running`` when training starts,
+#: ``interrupted`` when a SIGINT stopped it (model and normaliser saved), ``complete`` at the end
+#: (runs written before the field existed are complete).
+RUNNING, INTERRUPTED, COMPLETE = "running", "interrupted", "complete"
+_CHECKPOINT = re.compile(r"^(?P<algo>[a-z0-9]+)_(?P<steps>\d+)_steps\.zip$")
 
-    Parameters
-    ----------
-    env : environment name (or, multi-agent, a ParallelEnv constructor; then pass
-        ``env_name`` for the hyperparameter lookup and the config).
-    timesteps : environment steps (default: the YAML ``n_timesteps``).
-    hyperparams : overrides merged over the YAML entry.
-    env_kwargs : options of the environment (the task; evaluation uses these). The
-        recipe's ``env_kwargs`` (training-only options such as a tighter
-        ``state_bound``) are merged under them for training only.
-    hybrid : ``None`` (pure RL), ``"residual"`` (the action is a bounded correction of
-        the paper's controller, ``residual_scale`` of the recipe) or ``"bc"``
-        (behaviour-cloning warm start from the paper's controller, recipe key ``bc``:
-        ``{episodes, noise, epochs, lr}``); see :mod:`agents.hybrid`. The recipe is
-        looked up with the variant (``<env>-residual``, ``<env>-bc``).
-    callbacks : extra SB3 callbacks (e.g. :class:`agents.curves.EvalCurveCallback`).
-    checkpoint_freq : environment steps between checkpoints (default: timesteps // 4; 0 disables).
-    threads : torch threads (None keeps torch's default).
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """SIGINT stopped :func:`train` / :func:`resume`; the run was saved and can be resumed.
+
+    A ``KeyboardInterrupt`` (callers that know nothing of it stop as on Ctrl-C).
+    Attributes: ``path`` (the run directory), ``timesteps_done`` and ``timesteps`` (env steps).
     """
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.noise import NormalActionNoise
+
+    def __init__(self, path: str, timesteps_done: int, timesteps: int):
+        super().__init__(f"training interrupted after {timesteps_done} of {timesteps} env steps; "
+                         f"model, normaliser and config saved in {path}")
+        self.path, self.timesteps_done, self.timesteps = path, int(timesteps_done), int(timesteps)
+
+
+class _StopOnSigint:
+    """Context manager: the first SIGINT asks training to stop at the next environment step
+    (:meth:`callback` then returns False, SB3 ends ``learn()`` cleanly); a second SIGINT during
+    training raises ``KeyboardInterrupt`` at once; once ``saving`` is set (the final save, well
+    under a second) SIGINT is ignored, so no save is cut short. Installed only in the main thread
+    and over Python's default handler (a process that ignores SIGINT, such as a benchmark worker,
+    keeps ignoring it)."""
+
+    def __init__(self):
+        self.requested = False
+        self.saving = False
+        self._installed = False
+
+    def _handler(self, signum, frame):
+        if self.saving:
+            return
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __enter__(self):
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            signal.signal(signal.SIGINT, self._handler)
+            self._installed = True
+        return self
+
+    def __exit__(self, *exc):
+        if self._installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            self._installed = False
+        return False
+
+    def callback(self):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        stop = self
+
+        class _StopCallback(BaseCallback):
+            def _on_step(self) -> bool:
+                return not stop.requested
+
+        return _StopCallback()
+
+
+def _clear_run(out: str) -> None:
+    """Remove the files of a previous run in ``out`` (a new run replaces it: none of its models,
+    normalisers or checkpoints may be mistaken for the new run's, e.g. by :func:`resume`)."""
+    for f in ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl"):
+        if os.path.isfile(os.path.join(out, f)):
+            os.remove(os.path.join(out, f))
+    ck = os.path.join(out, "checkpoints")
+    if os.path.isdir(ck):
+        for f in os.listdir(ck):
+            if re.match(r"^[a-z0-9]+_(?:(?:vecnormalize|replay_buffer)_)?\d+_steps\.(?:zip|pkl)$", f):
+                os.remove(os.path.join(ck, f))
+
+
+def _write_json(path: str, obj: dict) -> None:
+    """Write ``obj`` to ``path`` atomically (a torn config.json is never left behind)."""
+    with open(path + ".tmp", "w") as fh:
+        json.dump(obj, fh, indent=2, default=str)
+    os.replace(path + ".tmp", path)
+
+
+def _save_model(model, path: str) -> None:
+    model.save(path + ".tmp")  # the suffix keeps SB3 from appending ".zip"
+    os.replace(path + ".tmp", path)
+
+
+def _save_pickle_atomic(save, path: str) -> None:
+    save(path + ".tmp")
+    os.replace(path + ".tmp", path)
+
+
+@dataclass
+class _Setup:
+    """What :func:`train` and :func:`resume` build before learning."""
+    venv: Any
+    n_agents: int
+    config: dict
+
+
+def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, hp: dict, timesteps: int,
+           seed: int, env_kwargs: dict | None, checkpoint_freq: int | None) -> _Setup:
+    """The training VecEnv (normalised when the recipe says so, not yet loaded from a save) and the
+    run's configuration (``config.json``) from the merged hyperparameters ``hp``."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    algo = algo.lower()
-    if multi_agent and algo not in MULTI_AGENT_ALGOS:
-        raise ValueError(f"multi-agent training supports {MULTI_AGENT_ALGOS}, not {algo!r}")
-    from .hybrid import HYBRIDS, behaviour_cloning_dataset, pretrain_ppo
-
-    if hybrid is not None and hybrid not in HYBRIDS:
-        raise ValueError(f"hybrid must be None or one of {HYBRIDS}, got {hybrid!r}")
-    if hybrid == "bc" and (algo != "ppo" or multi_agent):
-        raise ValueError("the behaviour-cloning warm start is implemented for centralised PPO (algo='ppo')")
-    name = env_name or (env if isinstance(env, str) else "default")
-    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams, variant=hybrid)
-    set_threads(threads)
     n_envs = int(hp.get("n_envs", 1))
-    timesteps = int(timesteps if timesteps is not None else hp.get("n_timesteps", 100000))
     user_kw = dict(env_kwargs or {})
     kw = dict(hp.get("env_kwargs") or {})
     kw.update(user_kw)
@@ -260,6 +335,20 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
         nk = dict(norm) if isinstance(norm, dict) else {}
         nk.setdefault("gamma", hp.get("gamma", 0.99))
         venv = VecNormalize(venv, **nk)
+    ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
+    config = {
+        "env": name, "algo": algo, "multi_agent": multi_agent, "hybrid": hybrid, "residual_scale": residual_scale,
+        "bc": None, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
+        "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
+        "env_kwargs": user_kw, "train_env_kwargs": kw, "normalize": bool(norm), "checkpoint_freq": ckpt,
+        "hyperparams": {k: v for k, v in hp.items()},
+    }
+    return _Setup(venv=venv, n_agents=n_agents, config=config)
+
+
+def _algo_kwargs(algo: str, hp: dict, venv) -> dict:
+    from stable_baselines3.common.noise import NormalActionNoise
+
     algo_kw = {k: v for k, v in hp.items() if k not in _EXTRA_KEYS}
     algo_kw["policy_kwargs"] = _policy_kwargs(algo_kw.get("policy_kwargs"))
     for key in ("learning_rate", "clip_range"):
@@ -269,63 +358,246 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     if noise and algo in ("td3", "sac"):
         d = venv.action_space.shape[0]
         algo_kw["action_noise"] = NormalActionNoise(np.zeros(d), float(noise.get("sigma", 0.1)) * np.ones(d))
-    out = out or default_run_dir(name, algo, multi_agent, seed)
-    os.makedirs(out, exist_ok=True)
-    cls = _algo_class(algo)
-    model = cls(hp.get("policy", "MlpPolicy"), venv, seed=seed, verbose=verbose, tensorboard_log=tensorboard, **algo_kw)
-    bc_info = None
-    if hybrid == "bc":
-        bc = dict(hp.get("bc") or {})
-        data = behaviour_cloning_dataset(gym_factory(env, kw), int(bc.get("episodes", 20)), seed=10_000_000 + seed,
-                                         noise=float(bc.get("noise", 0.1)))
-        bc_info = pretrain_ppo(model, data, epochs=int(bc.get("epochs", 30)), lr=float(bc.get("lr", 1e-3)), seed=seed)
+    return algo_kw
+
+
+def _learn(model, venv, config: dict, out: str, *, progress: bool, callbacks: list | None,
+           previous_seconds: float = 0.0) -> TrainResult:
+    """Learn up to the run's budget (continuing from ``model.num_timesteps``), save the run; on SIGINT
+    save it as interrupted and raise :class:`TrainingInterrupted`."""
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
+    algo, multi_agent, n_agents = config["algo"], config["multi_agent"], config["n_agents"]
+    timesteps, ckpt = config["timesteps"], config["checkpoint_freq"]
     sb3_steps = timesteps * n_agents
+    start = int(model.num_timesteps)
     callbacks = list(callbacks or [])
-    ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
     if ckpt > 0:
         callbacks.append(CheckpointCallback(save_freq=max(ckpt * n_agents // venv.num_envs, 1),
                                             save_path=os.path.join(out, "checkpoints"), name_prefix=algo,
-                                            save_vecnormalize=bool(norm)))
+                                            save_vecnormalize=config["normalize"]))
     if progress:
-        callbacks.append(TqdmCallback(timesteps, desc=f"{algo}{'-ma' if multi_agent else ''} {name}", scale=n_agents))
-    config = {
-        "env": name, "algo": algo, "multi_agent": multi_agent, "hybrid": hybrid, "residual_scale": residual_scale,
-        "bc": bc_info, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
-        "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
-        "env_kwargs": user_kw, "train_env_kwargs": kw, "normalize": bool(norm),
-        "hyperparams": {k: v for k, v in hp.items()},
-    }
+        callbacks.append(TqdmCallback(timesteps, desc=f"{algo}{'-ma' if multi_agent else ''} {config['env']}",
+                                      scale=n_agents))
     for cb in callbacks:  # callbacks that evaluate the live agent need its configuration
         if hasattr(cb, "agent_config"):
             cb.agent_config = config
+    config.update(status=RUNNING, timesteps_done=start // n_agents, sb3_timesteps=start)
+    _write_json(os.path.join(out, "config.json"), config)  # a run killed outright resumes from its checkpoints
     t0 = time.perf_counter()
-    model.learn(total_timesteps=sb3_steps, callback=CallbackList(callbacks) if callbacks else None,
-                tb_log_name=f"{algo}{'_ma' if multi_agent else ''}")
-    seconds = time.perf_counter() - t0
-    model.save(os.path.join(out, "model.zip"))
-    if norm:
-        venv.save(os.path.join(out, "vecnormalize.pkl"))
-    config.update(sb3_timesteps=int(model.num_timesteps), train_seconds=seconds)
-    with open(os.path.join(out, "config.json"), "w") as fh:
-        json.dump(config, fh, indent=2, default=str)
+    with _StopOnSigint() as stop:  # kept through the saves: no Ctrl-C cuts them short
+        model.learn(total_timesteps=sb3_steps - start, callback=CallbackList(callbacks + [stop.callback()]),
+                    tb_log_name=f"{algo}{'_ma' if multi_agent else ''}", reset_num_timesteps=start == 0)
+        stop.saving = True
+        seconds = previous_seconds + time.perf_counter() - t0
+        done = int(model.num_timesteps)
+        interrupted = stop.requested and done < sb3_steps
+        _save_model(model, os.path.join(out, "model.zip"))
+        if config["normalize"]:
+            _save_pickle_atomic(venv.save, os.path.join(out, "vecnormalize.pkl"))
+        replay = os.path.join(out, "replay_buffer.pkl")
+        if interrupted and getattr(model, "replay_buffer", None) is not None:
+            _save_pickle_atomic(model.save_replay_buffer, replay)  # off-policy: resume with the same buffer
+        elif os.path.exists(replay):
+            os.remove(replay)  # complete: only a resumable run needs it
+        config.update(status=INTERRUPTED if interrupted else COMPLETE, timesteps_done=done // n_agents,
+                      sb3_timesteps=done, model_sb3_timesteps=done, train_seconds=seconds)
+        _write_json(os.path.join(out, "config.json"), config)
     venv.close()
+    if interrupted:
+        raise TrainingInterrupted(out, done // n_agents, timesteps)
     return TrainResult(path=out, model=model, seconds=seconds, config=config)
+
+
+def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int | None = None, seed: int = 0,
+          out: str | None = None, tensorboard: str | None = None, progress: bool = True,
+          checkpoint_freq: int | None = None, hyperparams: dict | None = None, env_kwargs: dict | None = None,
+          threads: int | None = 1, verbose: int = 0, env_name: str | None = None,
+          hybrid: str | None = None, callbacks: list | None = None) -> TrainResult:
+    """Train ``algo`` on ``env`` and save the run directory (see module doc).
+
+    Parameters
+    ----------
+    env : environment name (or, multi-agent, a ParallelEnv constructor; then pass
+        ``env_name`` for the hyperparameter lookup and the config).
+    timesteps : environment steps (default: the YAML ``n_timesteps``).
+    hyperparams : overrides merged over the YAML entry.
+    env_kwargs : options of the environment (the task; evaluation uses these). The
+        recipe's ``env_kwargs`` (training-only options such as a tighter
+        ``state_bound``) are merged under them for training only.
+    hybrid : ``None`` (pure RL), ``"residual"`` (the action is a bounded correction of
+        the paper's controller, ``residual_scale`` of the recipe) or ``"bc"``
+        (behaviour-cloning warm start from the paper's controller, recipe key ``bc``:
+        ``{episodes, noise, epochs, lr}``); see :mod:`agents.hybrid`. The recipe is
+        looked up with the variant (``<env>-residual``, ``<env>-bc``).
+    callbacks : extra SB3 callbacks (e.g. :class:`agents.curves.EvalCurveCallback`).
+    checkpoint_freq : environment steps between checkpoints (default: timesteps // 4; 0 disables).
+    threads : torch threads (None keeps torch's default).
+
+    Interruption
+    ------------
+    In the main thread, a SIGINT (Ctrl-C) stops training at the next environment step, saves
+    ``model.zip``, ``vecnormalize.pkl`` (and an off-policy replay buffer, ``replay_buffer.pkl``)
+    and ``config.json`` with ``status: "interrupted"`` and ``timesteps_done``, then raises
+    :class:`TrainingInterrupted`; :func:`resume` continues the run. A second SIGINT before the
+    save aborts at once (``config.json`` stays ``"running"``; :func:`resume` starts from the last
+    checkpoint); during the save (well under a second) SIGINT is ignored.
+    """
+    algo = algo.lower()
+    if multi_agent and algo not in MULTI_AGENT_ALGOS:
+        raise ValueError(f"multi-agent training supports {MULTI_AGENT_ALGOS}, not {algo!r}")
+    from .hybrid import HYBRIDS, behaviour_cloning_dataset, pretrain_ppo
+
+    if hybrid is not None and hybrid not in HYBRIDS:
+        raise ValueError(f"hybrid must be None or one of {HYBRIDS}, got {hybrid!r}")
+    if hybrid == "bc" and (algo != "ppo" or multi_agent):
+        raise ValueError("the behaviour-cloning warm start is implemented for centralised PPO (algo='ppo')")
+    name = env_name or (env if isinstance(env, str) else "default")
+    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams, variant=hybrid)
+    set_threads(threads)
+    timesteps = int(timesteps if timesteps is not None else hp.get("n_timesteps", 100000))
+    s = _setup(env, name, algo, multi_agent=multi_agent, hybrid=hybrid, hp=hp, timesteps=timesteps, seed=seed,
+               env_kwargs=env_kwargs, checkpoint_freq=checkpoint_freq)
+    out = out or default_run_dir(name, algo, multi_agent, seed)
+    os.makedirs(out, exist_ok=True)
+    _clear_run(out)
+    model = _algo_class(algo)(hp.get("policy", "MlpPolicy"), s.venv, seed=seed, verbose=verbose,
+                              tensorboard_log=tensorboard, **_algo_kwargs(algo, hp, s.venv))
+    if hybrid == "bc":
+        bc = dict(hp.get("bc") or {})
+        kw = s.config["train_env_kwargs"]
+        data = behaviour_cloning_dataset(gym_factory(env, kw), int(bc.get("episodes", 20)), seed=10_000_000 + seed,
+                                         noise=float(bc.get("noise", 0.1)))
+        s.config["bc"] = pretrain_ppo(model, data, epochs=int(bc.get("epochs", 30)), lr=float(bc.get("lr", 1e-3)),
+                                      seed=seed)
+    return _learn(model, s.venv, s.config, out, progress=progress, callbacks=callbacks)
+
+
+@dataclass(frozen=True)
+class ResumePoint:
+    """The latest save of a run: ``model`` (a .zip), its normaliser and replay buffer (None when
+    absent) and the SB3 timesteps it holds."""
+    model: str
+    vecnormalize: str | None
+    replay_buffer: str | None
+    sb3_timesteps: int
+
+
+def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
+    """Where :func:`resume` continues the run in ``path``: the later of ``model.zip`` (saved on an
+    interrupt; ``config.json`` ``model_sb3_timesteps``) and the last complete checkpoint (a valid
+    zip, with its normaliser when the run normalises). Raises :class:`RunDirError` for a complete
+    run or one with no save."""
+    cfg = read_run_config(path, require_model=False) if cfg is None else cfg
+    total = int(cfg.get("timesteps", 0)) * int(cfg.get("n_agents", 1))
+    status = cfg.get("status", COMPLETE)
+    if status == COMPLETE or int(cfg.get("sb3_timesteps", 0)) >= total > 0:
+        raise RunDirError(f"{path!r} is a complete run ({cfg.get('timesteps')} env steps): nothing to resume; "
+                          f"train with --overwrite to replace it or choose another --out")
+    norm = bool(cfg.get("normalize"))
+    points = []
+    model = os.path.join(path, "model.zip")
+    if cfg.get("model_sb3_timesteps") is not None and os.path.isfile(model):  # saved on an interrupt
+        rb = os.path.join(path, "replay_buffer.pkl")
+        points.append(ResumePoint(model, os.path.join(path, "vecnormalize.pkl") if norm else None,
+                                  rb if os.path.isfile(rb) else None, int(cfg["model_sb3_timesteps"])))
+    ck = os.path.join(path, "checkpoints")
+    for f in sorted(os.listdir(ck)) if os.path.isdir(ck) else []:
+        m = _CHECKPOINT.match(f)
+        if m and m["algo"] == cfg["algo"]:
+            n = int(m["steps"])
+            vn = os.path.join(ck, f"{cfg['algo']}_vecnormalize_{n}_steps.pkl") if norm else None
+            points.append(ResumePoint(os.path.join(ck, f), vn, None, n))
+    # a kill can cut a checkpoint short: SB3 writes the model, then the normaliser, in place
+    complete = [p for p in points if zipfile.is_zipfile(p.model)
+                and (p.vecnormalize is None or os.path.isfile(p.vecnormalize))]
+    if not complete:
+        raise RunDirError(f"{path!r} has nothing to resume from (no model.zip of an interrupted run, no complete "
+                          f"checkpoints/{cfg['algo']}_<steps>_steps.zip" + (" with its normaliser)" if norm else ")"))
+    return max(complete, key=lambda p: (p.sb3_timesteps, p.replay_buffer is not None))
+
+
+def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose: int = 0,
+           tensorboard: str | None = None, callbacks: list | None = None,
+           allow_custom_env: bool = False) -> TrainResult:
+    """Continue the interrupted run in ``path`` from :func:`resume_point` up to its budget, with the
+    run's own configuration (``config.json``: env, algorithm, hyperparameters, seed, budget).
+
+    The model, the normaliser statistics and (off-policy, after a SIGINT) the replay buffer are
+    restored and SB3 keeps counting timesteps (schedules continue); the environments restart
+    with fresh episodes (seed ``seed + timesteps done``), so the result is not bit-identical to an
+    uninterrupted run. An off-policy run resumed from a checkpoint starts with an empty replay
+    buffer. Interrupting again works as in :func:`train`.
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from .config import check_env_name
+
+    cfg = read_run_config(path, require_model=False)
+    point = resume_point(path, cfg)
+    name = check_env_name(cfg["env"], multi_agent=bool(cfg["multi_agent"]), allow_custom=allow_custom_env,
+                          what="the run's environment (config.json 'env')")
+    set_threads(threads)
+    algo, hp, n_agents = cfg["algo"], dict(cfg["hyperparams"]), int(cfg["n_agents"])
+    seed = int(cfg["seed"]) + point.sb3_timesteps // n_agents
+    s = _setup(name, name, algo, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), hp=hp,
+               timesteps=int(cfg["timesteps"]), seed=seed, env_kwargs=cfg.get("env_kwargs"),
+               checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))
+    venv = s.venv
+    if point.vecnormalize is not None:
+        venv = VecNormalize.load(point.vecnormalize, venv.venv)
+    kw = _algo_kwargs(algo, hp, venv)
+    custom = {k: kw[k] for k in ("learning_rate", "clip_range") if k in kw}  # rebuilt, not unpickled closures
+    model = _algo_class(algo).load(point.model, env=venv, device="auto", custom_objects=custom,
+                                   tensorboard_log=tensorboard, verbose=verbose)
+    model.num_timesteps = point.sb3_timesteps
+    model.set_random_seed(seed)
+    if point.replay_buffer is not None:
+        model.load_replay_buffer(point.replay_buffer)
+    config = dict(cfg)
+    config.setdefault("checkpoint_freq", s.config["checkpoint_freq"])
+    config["resumes"] = list(cfg.get("resumes", [])) + [{"from": os.path.relpath(point.model, path),
+                                                          "timesteps_done": point.sb3_timesteps // n_agents,
+                                                          "replay_buffer": point.replay_buffer is not None}]
+    return _learn(model, venv, config, path, progress=progress, callbacks=callbacks,
+                  previous_seconds=float(cfg.get("train_seconds") or 0.0))
 
 
 class RunDirError(ValueError):
     """A run directory that is missing, incomplete or corrupt."""
 
 
-def read_run_config(path: str) -> dict:
-    """``config.json`` of a run directory (or of the directory holding ``model.zip``), validated."""
-    path = path[:-len("model.zip")] if str(path).endswith("model.zip") else str(path)
-    path = path.rstrip("/") or "."
-    if not os.path.isdir(path):
-        raise RunDirError(f"run directory {path!r} does not exist (expected the --out of a training run)")
-    cfg_path = os.path.join(path, "config.json")
-    for f in ("config.json", "model.zip"):
-        if not os.path.isfile(os.path.join(path, f)):
-            raise RunDirError(f"{path!r} is not a finished run directory: {f} is missing")
+@dataclass(frozen=True)
+class RunFiles:
+    """The files of a saved agent: its run directory, ``config.json``, the model (``model.zip`` or a
+    checkpoint) and the normaliser saved with it (None when the run does not normalise)."""
+    run_dir: str
+    config: dict
+    model: str
+    vecnormalize: str | None
+
+
+def _run_dir_of(path: str) -> tuple[str, str | None]:
+    """``(run directory, checkpoint file or None)`` of a path naming a run directory, its
+    ``model.zip`` or a checkpoint ``<run>/checkpoints/<algo>_<steps>_steps.zip``."""
+    path = str(path)
+    if os.path.isfile(path) and _CHECKPOINT.match(os.path.basename(path)):
+        ck_dir = os.path.dirname(os.path.abspath(path))
+        if os.path.basename(ck_dir) == "checkpoints":
+            return os.path.dirname(ck_dir), path
+    path = path[:-len("model.zip")] if path.endswith("model.zip") else path
+    return path.rstrip("/") or ".", None
+
+
+def read_run_config(path: str, *, require_model: bool = True) -> dict:
+    """``config.json`` of a run directory (or of the directory holding ``model.zip`` or the
+    checkpoint ``path``), validated; with ``require_model``, the model file must exist too."""
+    run, ckpt = _run_dir_of(path)
+    if not os.path.isdir(run):
+        raise RunDirError(f"run directory {run!r} does not exist (expected the --out of a training run)")
+    cfg_path = os.path.join(run, "config.json")
+    if not os.path.isfile(cfg_path):
+        raise RunDirError(f"{run!r} is not a run directory: config.json is missing")
     try:
         with open(cfg_path) as fh:
             cfg = json.load(fh)
@@ -336,7 +608,31 @@ def read_run_config(path: str) -> dict:
         raise RunDirError(f"{cfg_path} lacks {missing}")
     if cfg["algo"] not in ("ppo", "sac", "td3"):
         raise RunDirError(f"{cfg_path}: unknown algo {cfg['algo']!r}")
+    if require_model and ckpt is None and not os.path.isfile(os.path.join(run, "model.zip")):
+        hint = ""
+        if cfg.get("status") == RUNNING:
+            hint = " (training was stopped before it saved a model: resume it with --resume, or evaluate a " \
+                   "checkpoint, <run>/checkpoints/<algo>_<steps>_steps.zip)"
+        raise RunDirError(f"{run!r} is not a finished run directory: model.zip is missing{hint}")
     return cfg
+
+
+def run_files(path: str) -> RunFiles:
+    """The files :func:`load_agent` reads for ``path`` (a run directory, its ``model.zip`` or a checkpoint)."""
+    cfg = read_run_config(path)
+    run, ckpt = _run_dir_of(path)
+    norm = bool(cfg.get("normalize")) or (ckpt is None and os.path.exists(os.path.join(run, "vecnormalize.pkl")))
+    if ckpt is None:
+        model, vn = os.path.join(run, "model.zip"), os.path.join(run, "vecnormalize.pkl")
+    else:
+        m = _CHECKPOINT.match(os.path.basename(ckpt))
+        if m["algo"] != cfg["algo"]:
+            raise RunDirError(f"{ckpt!r} is a {m['algo']} checkpoint, the run trains {cfg['algo']}")
+        model = ckpt
+        vn = os.path.join(os.path.dirname(ckpt), f"{m['algo']}_vecnormalize_{m['steps']}_steps.pkl")
+    if norm and not os.path.isfile(vn):
+        raise RunDirError(f"{model!r} has no normaliser ({vn} is missing)")
+    return RunFiles(run, cfg, model, vn if norm else None)
 
 
 class TrainedAgent:
@@ -352,7 +648,7 @@ class TrainedAgent:
         """The agent being trained (``model``, its live ``VecNormalize`` or None), e.g. for
         learning curves: observations are normalised with the current statistics."""
         self = cls.__new__(cls)
-        self.config, self.path, self.model = dict(config), None, model
+        self.config, self.path, self.model_path, self.model = dict(config), None, None, model
         self.algo = config["algo"]
         self.multi_agent = bool(config["multi_agent"])
         self.vecnorm = vecnorm
@@ -364,16 +660,16 @@ class TrainedAgent:
         return self.vecnorm.normalize_obs(obs)
 
     def __init__(self, path: str, device: str = "cpu"):
-        path = path[:-len("model.zip")] if path.endswith("model.zip") else path
-        path = path.rstrip("/") or "."
-        self.config = read_run_config(path)
-        self.path = path
+        files = run_files(path)
+        self.config = files.config
+        self.path = files.run_dir
+        self.model_path = files.model
         self.algo = self.config["algo"]
         self.multi_agent = bool(self.config["multi_agent"])
-        self.model = _algo_class(self.algo).load(os.path.join(path, "model.zip"), device=device)
-        vn = os.path.join(path, "vecnormalize.pkl")
+        self.model = _algo_class(self.algo).load(files.model, device=device)
+        vn = files.vecnormalize
         self.vecnorm = None
-        if os.path.exists(vn):
+        if vn is not None:
             with open(vn, "rb") as fh:
                 self.vecnorm = pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
             self.vecnorm.training = False
@@ -455,5 +751,6 @@ class TrainedAgent:
 
 
 def load_agent(path: str, device: str = "cpu") -> TrainedAgent:
-    """Load a run directory (or its ``model.zip``) written by :func:`train`."""
+    """Load a run directory written by :func:`train` (or its ``model.zip``, or one of its checkpoints
+    ``<run>/checkpoints/<algo>_<steps>_steps.zip`` with the normaliser saved next to it)."""
     return TrainedAgent(path, device=device)

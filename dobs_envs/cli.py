@@ -47,9 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    result = args.func(args)
+    try:
+        args = build_parser().parse_args(argv)
+        result = args.func(args)
+    except KeyboardInterrupt:  # Ctrl-C: one line and 128 + SIGINT, no traceback (train/benchmark say more)
+        print("dobs-envs: interrupted", file=sys.stderr)
+        return 130
     return int(result or 0)
 
 

@@ -55,6 +55,8 @@ class Graph:
     adjacency: np.ndarray
 
     def __post_init__(self) -> None:
+        if np.iscomplexobj(self.adjacency):
+            raise ValueError("Graph: adjacency must be real, got a complex array")
         try:
             a = np.array(self.adjacency, dtype=float, copy=True)
         except (TypeError, ValueError) as exc:
@@ -113,6 +115,8 @@ class Graph:
         if weights is None:
             w = np.ones(len(edges))
         else:
+            if np.iscomplexobj(weights):
+                raise ValueError("Graph.from_edges: weights must be real, got complex values")
             w = np.asarray(weights, dtype=float).reshape(-1)
             if w.shape[0] != len(edges):
                 raise ValueError(

@@ -4,13 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
-
-from agents.config import gym_factory, parallel_factory  # noqa: E402
-from agents.evaluate import evaluate_policy  # noqa: E402
-from agents.hybrid import (ResidualGymWrapper, ResidualParallelEnv, ResidualPolicy,  # noqa: E402
+from agents.config import gym_factory, parallel_factory
+from agents.evaluate import evaluate_policy
+from agents.hybrid import (ResidualGymWrapper, ResidualParallelEnv, ResidualPolicy,
                            behaviour_cloning_dataset, pretrain_ppo)
-from baselines.policies import CentralizedSeparationPolicy, SeparationPolicy  # noqa: E402
+from baselines.policies import CentralizedSeparationPolicy, SeparationPolicy
 
 KW = {"max_cycles": 40}
 

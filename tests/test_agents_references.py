@@ -7,7 +7,7 @@ from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPol
 from dobs_envs.design.gains import shifted_are_feedback
 from dobs_envs.envs.base import make_parallel_env
 from dobs_envs.graphs import path_graph
-from dobs_envs.scenarios.base import Scenario  # noqa: E402
+from dobs_envs.scenarios.base import Scenario
 
 
 def double_integrator(C0):

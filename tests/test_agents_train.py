@@ -10,10 +10,8 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-pytest.importorskip("stable_baselines3")
-
-from agents.config import load_hyperparams  # noqa: E402
-from agents.train import load_agent, train  # noqa: E402
+from agents.config import load_hyperparams
+from agents.train import load_agent, train
 
 
 class PointMasses(ParallelEnv):

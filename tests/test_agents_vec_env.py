@@ -7,9 +7,7 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-pytest.importorskip("stable_baselines3")
-
-from agents.vec_env import ParallelVecEnv, SlotEncoder  # noqa: E402
+from agents.vec_env import ParallelVecEnv, SlotEncoder
 
 
 class TinyParallel(ParallelEnv):

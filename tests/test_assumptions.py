@@ -21,6 +21,8 @@ from dobs_envs.assumptions import (
 )
 from dobs_envs.graphs import Graph, path_graph
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 
 def _rot(n, seed):
     q, _ = np.linalg.qr(np.random.default_rng(seed).standard_normal((n, n)))
@@ -110,12 +112,7 @@ def test_matching_pass_returns_solution():
 
 def test_matching_ne3_holds():
     # NE3: B_v = [B^1 B^2] with B = [B^1 ... B^5]
-    B = np.zeros((9, 5))
-    B[1, 0] = B[3, 1] = 1
-    B[[0, 4, 5], 2] = 1
-    B[[2, 8], 3] = 1
-    B[0, 4] = 1
-    check_matching(B, B[:, :2])
+    check_matching(np.hstack(NE2.channels()), NE2.b_v())
 
 
 def test_matching_failure_reports_residual_and_directions():

@@ -6,17 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
+import gymnasium as gym
+from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
-import gymnasium as gym  # noqa: E402
-from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor  # noqa: E402
-
-import dobs_envs  # noqa: E402,F401
-from agents.core_vec_env import CoreVecEnv  # noqa: E402
-from agents.train import build_vec_env, core_of  # noqa: E402
-from agents.vec_env import ParallelVecEnv  # noqa: E402
-from dobs_envs import hetero_mas_v0, tracking_v0  # noqa: E402
-from dobs_envs.envs import HeteroMASEnv, TrackingEnv  # noqa: E402
+import dobs_envs  # noqa: F401
+from agents.core_vec_env import CoreVecEnv
+from agents.train import build_vec_env, core_of
+from agents.vec_env import ParallelVecEnv
+from dobs_envs import hetero_mas_v0, tracking_v0
+from dobs_envs.envs import HeteroMASEnv, TrackingEnv
 
 
 def _same_streams(va, vb, actions):

@@ -6,18 +6,11 @@ import scipy.linalg as sla
 from dobs_envs.assumptions import DetectabilityError, StabilizabilityError
 from dobs_envs.design.gains import lyapunov_P, observer_are_gain, shifted_are_feedback, split_gain
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 
 def ne2_system():
-    A = np.zeros((9, 9))
-    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
-        A[i, j] = 1.0
-    chans = [np.zeros((9, 1)) for _ in range(5)]
-    chans[0][1] = 1
-    chans[1][3] = 1
-    chans[2][[0, 4, 5]] = 1
-    chans[3][[2, 8]] = 1
-    chans[4][0] = 1
-    return A, chans
+    return NE2.A(), NE2.channels()
 
 
 def _are_residual(A, B, X, shift, Q, Rinv):

@@ -42,6 +42,8 @@ from dobs_envs.design.subspaces import (
     subspace_sum,
 )
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 TOL = 1e-8
 
 
@@ -57,37 +59,14 @@ def same(X, Y, tol=TOL):
 # the paper's NE2 / NE3 systems (section NE2 of the paper)
 # ---------------------------------------------------------------------------
 def ne2():
-    A = np.zeros((9, 9))
-    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
-        A[i, j] = 1.0
-    Bc = [
-        e(9, 1),
-        e(9, 3),
-        np.array([[1, 0, 0, 0, 1, 1, 0, 0, 0]], float).T,
-        np.array([[0, 0, 1, 0, 0, 0, 0, 0, 1]], float).T,
-        e(9, 0),
-    ]
-    Cs = [np.eye(9)[[k]] for k in (0, 2, 4, 6, 1, 3)]
-    known = [0, 1, 2, 3, 4, 4]  # node 6 knows channel 5
-    s = np.sqrt(0.5)
-    paper_T = [
-        e(9, 0),
-        np.array([[0, 0, 0, 0, 0, 0, .5, -s, .5], [0, 0, 0, -s, 0, 0, .5, 0, -.5],
-                  [0, 0, -1, 0, 0, 0, 0, 0, 0]]).T,
-        np.array([[0, 0, 0, 0, 0, -1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0, 0, 0]], float).T,
-        np.array([[0, 0, 0, 0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 0, 0, 0, 1],
-                  [0, 0, 0, 0, 0, 0, -1, 0, 0]], float).T,
-        e(9, 1),
-        e(9, 3),
-    ]
-    B_unknown = [np.hstack([Bc[k] for k in range(5) if k != known[i]]) for i in range(6)]
-    return A, Bc, Cs, B_unknown, paper_T
+    """NE2 (tests/paper_ne2.py): A, channels, outputs, each node's unknown input, the printed T_id."""
+    nodes = range(NE2.N_NODES)
+    return NE2.A(), NE2.channels(), NE2.outputs(), [NE2.b_unknown(i) for i in nodes], [NE2.t_d(i) for i in nodes]
 
 
 @pytest.mark.parametrize("node", range(6))
 def test_ne2_matches_paper(node):
-    """The paper prints T_1d..T_6d for NE2 (4 decimals, 0.7071 ~ 1/sqrt 2): the
-    printed 0.7071 differs from 1/sqrt(2) by 7e-6, so we build the exact values."""
+    """The paper prints T_1d..T_6d for NE2 (4 decimals; tests/paper_ne2.py holds the exact values)."""
     A, _, Cs, Bu, paper_T = ne2()
     T = reconstructible_subspace(A, Bu[node], Cs[node])
     assert T.shape == paper_T[node].shape
@@ -99,11 +78,9 @@ def test_ne2_matches_paper(node):
 def test_ne3_matches_paper(node):
     """NE3 adds B_v = [B^1 B^2] to every node's unknown input; the paper gives
     T_2d = e3 and the other T_id unchanged from NE2."""
-    A, Bc, Cs, Bu, paper_T = ne2()
-    Bv = np.hstack([Bc[0], Bc[1]])
-    T = reconstructible_subspace(A, np.hstack([Bu[node], Bv]), Cs[node])
-    expected = e(9, 2) if node == 1 else paper_T[node]
-    assert same(T, expected)
+    A, _, Cs, Bu, _ = ne2()
+    T = reconstructible_subspace(A, np.hstack([Bu[node], NE2.b_v()]), Cs[node])
+    assert same(T, NE2.t_d(node, ne3=True))
 
 
 def test_ne2_collectively_strongly_detectable():

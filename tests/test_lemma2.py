@@ -7,8 +7,8 @@ Tolerances
   Every quantity is a product of a handful of orthogonal factors and one
   triangular solve, so round-off gives ~1e-15; 1e-9 (the contract) leaves six
   orders of magnitude for the conditioning of the random systems.
-* The paper prints ``T_id`` with 4 digits (0.7071 = 1/sqrt(2) - 6.8e-6), so the
-  projector distance to the printed values can be ~1e-5; we allow 1e-3.
+* The paper prints ``T_id`` with 4 digits; tests/paper_ne2.py holds the exact values
+  (0.7071 = 1/sqrt(2) - 6.8e-6), and the comparison allows 1e-3.
 * Comparisons between two exact computations of the same subspace (scaling,
   reference characterisation) use 1e-6: rank decisions are at 1e-9 relative,
   and subspace angles are perturbed by ~eps / gap with gaps >= ~1e-6 on the
@@ -27,6 +27,8 @@ from hypothesis import strategies as st
 from dobs_envs.design.lemma2 import StrongDetectability, lemma2_residuals, strong_detectability
 from dobs_envs.design.subspaces import is_hurwitz, null_space, orth, projector_distance
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 RES_TOL = 1e-9
 PAPER_TOL = 1e-3
 EXACT_TOL = 1e-6
@@ -36,35 +38,8 @@ EXACT_TOL = 1e-6
 # paper data (Section V-B, NE2; Section VI-B, NE3)
 # ---------------------------------------------------------------------------
 def ne2_data():
-    A = np.zeros((9, 9))
-    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
-        A[i, j] = 1.0
-    e = np.eye(9)
-    chans = [
-        e[:, [1]],  # B^1
-        e[:, [3]],  # B^2
-        e[:, [0]] + e[:, [4]] + e[:, [5]],  # B^3
-        e[:, [2]] + e[:, [8]],  # B^4
-        e[:, [0]],  # B^5
-    ]
-    C = [e[[0]], e[[2]], e[[4]], e[[6]], e[[1]], e[[3]]]  # C_1 .. C_6
-    known = [0, 1, 2, 3, 4, 4]  # node i knows channel i (i=1..5), node 6 knows channel 5
-    B_minus = [np.hstack([chans[k] for k in range(5) if k != known[i]]) for i in range(6)]
-    return A, chans, C, B_minus
-
-
-PAPER_T_NE2 = [
-    [[1, 0, 0, 0, 0, 0, 0, 0, 0]],
-    [
-        [0, 0, 0, 0, 0, 0, 0.5, -0.7071, 0.5],
-        [0, 0, 0, -0.7071, 0, 0, 0.5, 0, -0.5],
-        [0, 0, -1, 0, 0, 0, 0, 0, 0],
-    ],
-    [[0, 0, 0, 0, 0, -1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0, 0, 0]],
-    [[0, 0, 0, 0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, -1, 0, 0]],
-    [[0, 1, 0, 0, 0, 0, 0, 0, 0]],
-    [[0, 0, 0, 1, 0, 0, 0, 0, 0]],
-]
+    """NE2 (tests/paper_ne2.py): A, channels, outputs C_1..C_6, each node's unknown input B_i^-."""
+    return NE2.A(), NE2.channels(), NE2.outputs(), [NE2.b_unknown(i) for i in range(NE2.N_NODES)]
 
 
 def check_contract(A, B, C, res: StrongDetectability):
@@ -140,7 +115,7 @@ def test_ne2_matches_paper(i):
     A, _, C, Bm = ne2_data()
     res = strong_detectability(A, Bm[i], C[i])
     check_contract(A, Bm[i], C[i], res)
-    paper = np.array(PAPER_T_NE2[i], dtype=float).T
+    paper = NE2.t_d(i)
     assert res.delta == paper.shape[1]
     assert projector_distance(res.T_d, paper) <= PAPER_TOL
 
@@ -148,11 +123,11 @@ def test_ne2_matches_paper(i):
 @pytest.mark.parametrize("i", range(6))
 def test_ne3_matches_paper(i):
     """NE3: B_v = [B^1 B^2] is unknown to every node; T_2d = e3, others as NE2."""
-    A, chans, C, Bm = ne2_data()
-    B = np.hstack([Bm[i], chans[0], chans[1]])  # redundant columns for nodes 3..6
+    A, _, C, _ = ne2_data()
+    B = NE2.b_unknown(i, ne3=True)  # redundant columns for nodes 3..6
     res = strong_detectability(A, B, C[i])
     check_contract(A, B, C[i], res)
-    paper = np.eye(9)[:, [2]] if i == 1 else np.array(PAPER_T_NE2[i], dtype=float).T
+    paper = NE2.t_d(i, ne3=True)
     assert res.delta == paper.shape[1]
     assert projector_distance(res.T_d, paper) <= PAPER_TOL
 

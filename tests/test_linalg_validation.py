@@ -73,3 +73,17 @@ def test_as_array_and_tol():
     for bad in (-1.0, 0.0, float("nan"), "x"):
         with pytest.raises(ValueError, match="tol"):
             check_tol(bad)
+
+
+def test_as_numeric_refuses_bool_complex_and_strings_without_copying_numbers():
+    from dobs_envs.linalg import as_numeric
+
+    a = np.arange(3.0)
+    assert as_numeric(a, "u") is a  # float arrays pass through untouched (the step path)
+    assert as_numeric([1, 2], "u").dtype.kind == "i"
+    for bad, dtype in [(np.ones(2, bool), "bool"), ([True], "bool"), (np.ones(2, complex), "complex128"),
+                       (["a"], "str")]:
+        with pytest.raises(ValueError, match=f"^u must be real numbers \\(float or integer\\), got dtype {dtype}"):
+            as_numeric(bad, "u")
+    with pytest.raises(ValueError, match="^u must be real numbers"):
+        as_numeric([[1.0], [1.0, 2.0]], "u")  # ragged

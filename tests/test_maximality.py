@@ -24,6 +24,8 @@ from dobs_envs.design import lemma2
 from dobs_envs.design.geometric import reconstructible_subspace
 from dobs_envs.design.subspaces import is_hurwitz, projector_distance
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 PROJ_TOL = 1e-6
 
 
@@ -65,20 +67,8 @@ def compare(A, B, C):
 # the paper's examples
 # ---------------------------------------------------------------------------
 def ne2():
-    A = np.zeros((9, 9))
-    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
-        A[i, j] = 1.0
-    Bc = [
-        e(9, 1),
-        e(9, 3),
-        np.array([[1, 0, 0, 0, 1, 1, 0, 0, 0]], float).T,
-        np.array([[0, 0, 1, 0, 0, 0, 0, 0, 1]], float).T,
-        e(9, 0),
-    ]
-    Cs = [np.eye(9)[[k]] for k in (0, 2, 4, 6, 1, 3)]
-    known = [0, 1, 2, 3, 4, 4]  # node i knows channel i, node 6 knows channel 5
-    Bu = [np.hstack([Bc[k] for k in range(5) if k != known[i]]) for i in range(6)]
-    return A, Bc, Cs, Bu
+    """NE2 (tests/paper_ne2.py): A, channels, outputs, each node's unknown input."""
+    return NE2.A(), NE2.channels(), NE2.outputs(), [NE2.b_unknown(i) for i in range(NE2.N_NODES)]
 
 
 @pytest.mark.parametrize("node", range(6))
@@ -89,8 +79,8 @@ def test_ne2(node):
 
 @pytest.mark.parametrize("node", range(6))
 def test_ne3(node):
-    A, Bc, Cs, Bu = ne2()
-    compare(A, np.hstack([Bu[node], Bc[0], Bc[1]]), Cs[node])
+    A, _, Cs, _ = ne2()
+    compare(A, NE2.b_unknown(node, ne3=True), Cs[node])
 
 
 @pytest.mark.parametrize("node", range(6))

@@ -19,6 +19,8 @@ from dobs_envs.design import (
 from dobs_envs.design.subspaces import projector_distance
 from dobs_envs.graphs import Graph, path_graph, random_connected_graph, ring_graph
 
+import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
+
 # Round-off bound for identities built from O(n) products of O(1) orthonormal /
 # well-scaled factors (n <= 12 here): ~n * eps * (norms ~ 10) -> 1e-12 is safe.
 ATOL = 1e-10
@@ -26,37 +28,8 @@ ATOL = 1e-10
 
 # ------------------------------------------------------------------ paper systems
 def ne2():
-    A = np.zeros((9, 9))
-    for i, j in [(0, 1), (0, 3), (1, 8), (2, 3), (3, 6), (4, 5), (6, 7), (7, 8)]:
-        A[i, j] = 1.0
-    chans = [np.zeros((9, 1)) for _ in range(5)]
-    chans[0][1] = 1
-    chans[1][3] = 1
-    chans[2][[0, 4, 5]] = 1
-    chans[3][[2, 8]] = 1
-    chans[4][0] = 1
-    C = [np.eye(9)[[k]] for k in [0, 2, 4, 6, 1, 3]]
-    known = [[0], [1], [2], [3], [4], [4]]  # B_i = B^i (i = 1..5), B_6 = B^5 (paper, 1-based)
-    return A, chans, C, known
-
-
-def _rows(*rows):
-    return np.array(rows, dtype=float).T
-
-
-# T_id printed in Section NE2 (1-based states in the paper -> columns here)
-NE2_T = [
-    _rows([1, 0, 0, 0, 0, 0, 0, 0, 0]),
-    _rows(
-        [0, 0, 0, 0, 0, 0, 0.5, -np.sqrt(0.5), 0.5],
-        [0, 0, 0, -np.sqrt(0.5), 0, 0, 0.5, 0, -0.5],
-        [0, 0, -1, 0, 0, 0, 0, 0, 0],
-    ),
-    _rows([0, 0, 0, 0, 0, -1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0, 0, 0]),
-    _rows([0, 0, 0, 0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, -1, 0, 0]),
-    _rows([0, 1, 0, 0, 0, 0, 0, 0, 0]),
-    _rows([0, 0, 0, 1, 0, 0, 0, 0, 0]),
-]
+    """NE2 (tests/paper_ne2.py): A, channels, outputs, the channel each node knows (as lists)."""
+    return NE2.A(), NE2.channels(), NE2.outputs(), [[k] for k in NE2.KNOWN]
 
 
 def ne1_agents():
@@ -155,7 +128,8 @@ def test_ne2_design_matches_paper():
     d = design_distributed_observer(A, chans, C, known, ring_graph(6))
     assert d.n_nodes == 6 and d.n_states == 9 and d.n_inputs == 5
     assert d.delta.tolist() == [1, 3, 2, 3, 1, 1]
-    for i, T in enumerate(NE2_T):
+    for i in range(NE2.N_NODES):
+        T = NE2.t_d(i)
         assert projector_distance(d.T_d[i], T) < 1e-8, f"node {i}"
     assert len(d.lemma2) == 6
     check_structure(d)
@@ -166,12 +140,11 @@ def test_ne2_design_matches_paper():
 
 def test_ne3_design_with_unknown_input():
     A, chans, C, known = ne2()
-    B_v = np.hstack(chans[:2])  # B_v = [B^1 B^2]
+    B_v = NE2.b_v()  # B_v = [B^1 B^2]
     d = design_distributed_observer(A, chans, C, known, ring_graph(6), B_v=B_v)
     assert d.B_v.shape == (9, 2)
-    assert projector_distance(d.T_d[1], np.eye(9)[:, [2]]) < 1e-8  # printed T_2d of NE3
-    for i in [0, 2, 3, 4, 5]:
-        assert projector_distance(d.T_d[i], NE2_T[i]) < 1e-8, f"node {i}"
+    for i in range(NE2.N_NODES):  # printed T_2d = e_3 of NE3, the others as NE2
+        assert projector_distance(d.T_d[i], NE2.t_d(i, ne3=True)) < 1e-8, f"node {i}"
     check_structure(d)
     check_error_dynamics(d, seed=1)
     for i in range(6):

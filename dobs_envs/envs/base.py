@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from ..linalg.validation import NUMERIC_KINDS, as_numeric
 from .distributions import DEFAULT_INIT_NOISE
 from .options import RENDER_MODES, EnvOptions
 from .rendering import LivePlot
@@ -157,9 +158,10 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode (no live agents); call reset() first")
         buf = self._u if self._a is None else self._a
-        try:  # fast path: exactly the agents, right shapes, numeric -> one concatenate into buf
+        try:  # fast path: exactly the agents, right shapes, float/int arrays -> one concatenate into buf
             vals = [actions[a] for a in self.possible_agents]
-            ok = len(actions) == len(vals) and [v.shape for v in vals] == self._shapes
+            ok = (len(actions) == len(vals) and [v.shape for v in vals] == self._shapes
+                  and all(v.dtype.kind in NUMERIC_KINDS for v in vals))  # bool/complex: refused by the slow path
             if ok:
                 np.concatenate(vals, out=buf[0], casting="same_kind")
         except (KeyError, TypeError, ValueError, AttributeError):
@@ -187,10 +189,7 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         new = u.copy()
         for agent, a in actions.items():
             k = self._agent(agent)
-            try:
-                arr = np.asarray(a, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"action of agent {agent!r} is not a numeric array: {a!r}") from None
+            arr = as_numeric(a, f"action of agent {agent!r}")
             if arr.shape != (self._widths[k],):
                 raise ValueError(f"action of agent {agent!r} must have shape ({self._widths[k]},), got {arr.shape}")
             new[self._offsets[k]:self._offsets[k] + self._widths[k]] = arr

@@ -52,6 +52,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from ..linalg.validation import as_numeric
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 from .base import DObsParallelEnv
 
@@ -114,10 +115,7 @@ class CentralizedEnv(gym.Env):
     def step(self, action):
         if not self.core.started:
             raise RuntimeError("call reset() before step()")
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be a numeric array of shape ({self._u.shape[1]},), got {action!r}") from None
+        a = as_numeric(action, "action")
         if a.shape != self._u.shape[1:]:
             raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
         self._u[0] = a * self.core.action_scale if self.core.normalized_actions else a

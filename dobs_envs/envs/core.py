@@ -54,7 +54,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..linalg.validation import as_array, as_square
+from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric
 from ..sim import SimParams, SimState
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
@@ -222,8 +222,8 @@ class EnvCore:
         self._state_index, self.state_layout = L.state_index(self.has_reference)
         self.state_dim = int(self._state_index.size)
         # --- reward -------------------------------------------------------------------------
-        self.Q = _ro(self._weight(o.Q, sc.Q, n, "Q"))
-        self.R = _ro(self._weight(o.R, sc.R, m, "R"))
+        self.Q = _ro(self._weight(o.Q, sc.Q, n, "Q", definite=False))
+        self.R = _ro(self._weight(o.R, sc.R, m, "R", definite=True))
         self.state_bound, self.termination_penalty = o.state_bound, o.termination_penalty
         self.reward_kind, self.cost_scale = o.reward, o.cost_scale
         # Cost of sitting on the bound for one control step: lambda_max(Q) * state_bound^2 * T
@@ -251,12 +251,14 @@ class EnvCore:
 
     # ------------------------------------------------------------------ construction helpers
     @staticmethod
-    def _weight(val, default, size, name):
-        M = default if val is None else val
-        M = as_square(M, name, vector_as="col" if size == 1 else None)
-        if M.shape != (size, size):
-            raise ValueError(f"{name} must be a finite ({size}, {size}) matrix, got shape {M.shape}")
-        return np.ascontiguousarray(M)
+    def _weight(val, default, size, name, *, definite):
+        """The cost weight option ``name`` (``None``: the scenario's), checked as the Scenario checks its
+        own: ``Q`` symmetric positive semidefinite, ``R`` symmetric positive definite."""
+        if val is None:
+            return np.ascontiguousarray(default)
+        if size == 1 and np.ndim(val) == 1:
+            val = np.reshape(val, (1, 1))
+        return np.ascontiguousarray(as_symmetric(val, size, name, definite=definite))
 
     def _shaped(self, c: float) -> float:
         """Stage cost of the reward: ``c`` (quadratic), ``log(1 + c / c0)`` (log) or ``sqrt(c)`` (sqrt)."""
@@ -439,20 +441,20 @@ class EnvCore:
 
     # ------------------------------------------------------------------ step
     def advance(self, u) -> StepResult:
-        """One control step of every copy with the inputs ``u (B, m)`` (any float dtype; clipped to
+        """One control step of every copy with the inputs ``u (B, m)`` (float or integer dtype; clipped to
         ``[-action_bound, action_bound]``, the clipped input is simulated and charged).
 
         Returns the :class:`StepResult` views ``(reward, terminated, truncated, reason)``. A copy
         that ended must be reset before it is advanced again (its results are then meaningless).
         Raises ``ValueError`` (naming the copy and the agents) and simulates nothing when some
-        input is NaN/inf.
+        input is NaN/inf, or when ``u`` is boolean or complex.
         """
         u = np.asarray(u)
         if u.dtype != np.float64 or not u.flags.c_contiguous:
-            try:
-                u = np.ascontiguousarray(u, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"u must be a numeric array of shape ({self.num_envs}, {self.n_inputs})") from None
+            if u.dtype.kind not in NUMERIC_KINDS:  # bool would act as 0/1, complex lose its imaginary part
+                raise ValueError(f"u must be real numbers (float or integer) of shape ({self.num_envs}, "
+                                 f"{self.n_inputs}), got dtype {u.dtype.name}")
+            u = np.ascontiguousarray(u, dtype=np.float64)
         if u.shape != (self.num_envs, self.n_inputs):
             raise ValueError(f"u must have shape ({self.num_envs}, {self.n_inputs}) (copies, inputs), got {u.shape}")
         args = (self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI, self._consts)

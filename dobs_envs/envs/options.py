@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from ..linalg.validation import NUMERIC_KINDS
+
 __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
 
 #: reward shapes of the ``reward`` option
@@ -61,7 +63,8 @@ class EnvOptions:
     obs_dtype : str
         ``"float32"`` or ``"float64"``.
     Q, R : array_like, optional
-        Cost weights (``None``: the scenario's).
+        Cost weights (``None``: the scenario's): ``Q`` (n, n) symmetric positive semidefinite,
+        ``R`` (m, m) symmetric positive definite (checked by the core, as the Scenario checks its own).
     action_bound : float, array_like (m,) or "auto", optional
         Per input component (``None``: the environment's default).
     init_noise : float, optional
@@ -186,9 +189,14 @@ class EnvOptions:
                 raise ValueError(f"action_bound must be a number, an array (one per input component) or 'auto', "
                                  f"got {ab!r}")
         elif ab is not None:
-            arr = np.array(ab, dtype=np.float64) if not isinstance(ab, bool) else np.array(np.nan)
+            try:
+                arr = np.asarray(ab)
+            except (TypeError, ValueError):  # ragged sequences
+                arr = np.array(np.nan)
+            # bool and complex are refused (not cast to 1.0 / the real part)
+            arr = arr.astype(np.float64) if arr.dtype.kind in NUMERIC_KINDS else np.array(np.nan)
             if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
-                raise ValueError(f"action_bound must be a positive finite scalar or one per input component, "
+                raise ValueError(f"action_bound must be a positive finite real number or one per input component, "
                                  f"got {ab!r}")
             arr.flags.writeable = False
             set_("action_bound", float(arr) if arr.ndim == 0 else arr)

@@ -35,6 +35,7 @@ from gymnasium.vector import VectorEnv
 from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
+from ..linalg.validation import as_numeric
 from ..registry import ENVIRONMENTS, EnvEntry
 from .centralized import reject_horizon_options, central_spaces
 from .options import RENDER_MODES
@@ -96,7 +97,7 @@ class DObsVectorEnv(VectorEnv):
         return self._obs(), self._infos(np.zeros(B, dtype=np.int8))
 
     def step(self, actions):
-        a = np.asarray(actions, dtype=np.float64)
+        a = np.asarray(as_numeric(actions, "actions"), dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape} (copies, inputs), got {a.shape}")
         if self.core.normalized_actions:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_array", "as_matrix", "as_square", "as_symmetric", "check_tol"]
+__all__ = ["as_array", "as_matrix", "as_square", "as_symmetric", "as_numeric", "check_tol", "NUMERIC_KINDS"]
 
 #: Relative tolerance of :func:`as_symmetric`: ``max |M - M^T| <= SYM_RTOL * max(1, max |M|)``.
 SYM_RTOL = 1e-10
@@ -17,6 +17,9 @@ SYM_RTOL = 1e-10
 #: positive definite needs ``lambda_min > PD_RTOL``, semidefinite ``lambda_min >= -PSD_RTOL``.
 PD_RTOL = 1e-12
 PSD_RTOL = 1e-10
+#: ``dtype.kind`` of the arrays :func:`as_numeric` accepts: float, signed and unsigned integer
+#: (not bool, complex, strings or objects).
+NUMERIC_KINDS = frozenset("fiu")
 
 
 def as_array(a, name: str, *, shape: tuple | None = None, ndim: int | None = None) -> np.ndarray:
@@ -153,6 +156,27 @@ def as_symmetric(M, size: int, name: str, *, definite: bool) -> np.ndarray:
     if not definite and ev < -PSD_RTOL * scale:
         raise ValueError(f"{name} must be symmetric positive semidefinite (min eigenvalue {ev:.3g})")
     return M
+
+
+def as_numeric(a, name: str) -> np.ndarray:
+    """``a`` as an ndarray of real numbers (float or integer dtype), without copying an array.
+
+    For inputs applied as they are (actions): ``bool`` would silently become 0/1 and complex
+    values would lose their imaginary part in a cast to float, so both are refused. No shape
+    or finiteness check (the caller does them where it knows the shape).
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` and the dtype found: bool, complex, string/object or ragged input.
+    """
+    try:
+        arr = np.asarray(a)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be real numbers (float or integer), got {a!r}") from None
+    if arr.dtype.kind not in NUMERIC_KINDS:
+        raise ValueError(f"{name} must be real numbers (float or integer), got dtype {arr.dtype.name}")
+    return arr
 
 
 def check_tol(tol, name: str = "tol") -> float | None:

@@ -86,10 +86,19 @@ _NE1_X0 = (-1.0, -2.0, -3.0, -4.0, 5.0, 4.0, 3.0, 2.0, 1.0)
 
 
 def _agent_dims(agents) -> list:
+    bad = ValueError("agents must be a sequence of (A_i, B_i, C_i) triples")
     try:
-        dims = [int(np.atleast_2d(np.asarray(a, dtype=float)).shape[0]) for a, _, _ in agents]
+        triples = [(a, b, c) for a, b, c in agents]
     except (TypeError, ValueError):
-        raise ValueError("agents must be a sequence of (A_i, B_i, C_i) triples") from None
+        raise bad from None
+    for i, triple in enumerate(triples):
+        for name, M in zip("ABC", triple):
+            if np.iscomplexobj(M):  # the float block assembly would drop the imaginary part
+                raise ValueError(f"agents: agent {i}: {name} must be real, got a complex array")
+    try:
+        dims = [int(np.atleast_2d(np.asarray(a, dtype=float)).shape[0]) for a, _, _ in triples]
+    except (TypeError, ValueError):
+        raise bad from None
     if not dims:
         raise ValueError("agents must contain at least one agent")
     return dims

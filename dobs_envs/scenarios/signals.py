@@ -24,6 +24,9 @@ class Sinusoids:
     phase: tuple
 
     def __post_init__(self):
+        for name in ("amplitude", "frequency", "phase"):
+            if np.iscomplexobj(getattr(self, name)):
+                raise ValueError(f"Sinusoids: {name} must be real, got complex values")
         a, w, ph = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (self.amplitude, self.frequency, self.phase))
         m = max(a.size, w.size, ph.size)
         try:
