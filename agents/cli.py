@@ -103,7 +103,7 @@ _positive_int = _int_at_least(1, "a positive integer")
 
 
 def _train(args) -> int:
-    from .config import EnvNameError, check_env_name
+    from .config import EnvNameError, HyperparamsError, check_env_name
     from .train import default_run_dir, train
 
     try:
@@ -124,6 +124,8 @@ def _train(args) -> int:
         if "unexpected keyword argument" in str(exc):
             _usage_error(f"--hyperparams: {exc}")
         raise
+    except HyperparamsError as exc:  # names its source: --hyperparams ("overrides") or the recipe file
+        _usage_error(str(exc))
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
