@@ -184,11 +184,17 @@ _UNSUPPORTED_KEYS = ("frame_stack", "vec_env_wrapper", "callback", "monitor_kwar
 RESCALE_WRAPPER = "gymnasium.wrappers.RescaleAction"
 _RESCALE_ARGS = {"min_action": -1, "max_action": 1}
 _NOISE_TYPES = ("normal",)
+#: longest ``policy_kwargs`` / ``normalize`` string parsed
+_MAX_KWARGS_STRING = 10_000
 
 
 class HyperparamsError(ValueError):
     """A hyperparameter file (or override) that agents/ cannot read; the message names the file,
     the section and the key."""
+
+
+def _short(text: str, limit: int = 120) -> str:
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} characters)"
 
 
 def _literal(node: ast.AST, where: str, key: str, text: str):
@@ -204,7 +210,7 @@ def _literal(node: ast.AST, where: str, key: str, text: str):
         return vals if isinstance(node, ast.List) else tuple(vals)
     if isinstance(node, ast.Dict):
         if any(k is None or not isinstance(k, ast.Constant) or not isinstance(k.value, str) for k in node.keys):
-            raise HyperparamsError(f"{where}: {key} = {text!r}: dictionary keys must be strings")
+            raise HyperparamsError(f"{where}: {key} = {_short(text)}: dictionary keys must be strings")
         return {k.value: _literal(v, where, key, text) for k, v in zip(node.keys, node.values)}
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" \
             and not node.args and all(kw.arg is not None for kw in node.keywords):
@@ -216,20 +222,26 @@ def _literal(node: ast.AST, where: str, key: str, text: str):
             return _ACTIVATION_BY_CLASS[cls]
     allowed = ", ".join(f"nn.{c}" for c in _ACTIVATION_BY_CLASS)
     raise HyperparamsError(
-        f"{where}: {key} = {text!r}: {ast.unparse(node)!r} is not accepted; agents/ never evaluates code from a "
+        f"{where}: {key} = {_short(text)}: {_short(ast.unparse(node), 80)} is not accepted; agents/ never evaluates code from a "
         f"hyperparameter file: use literals, lists, dict(...) and the activations {allowed}")
 
 
 def parse_kwargs_string(text: str, where: str, key: str) -> dict:
     """rl-zoo3's ``"dict(a=1, activation_fn=nn.Tanh)"`` (or ``"{'a': 1}"``) as a mapping, parsed
     without evaluating anything (activations become names, ``nn.Tanh`` -> ``"tanh"``)."""
+    if len(text) > _MAX_KWARGS_STRING:
+        raise HyperparamsError(f"{where}: {key} is a string of {len(text)} characters (at most {_MAX_KWARGS_STRING})")
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        value = _literal(tree.body, where, key, text)
     except SyntaxError as exc:
-        raise HyperparamsError(f"{where}: {key} = {text!r} is not a Python expression ({exc.msg})") from None
-    value = _literal(tree.body, where, key, text)
+        raise HyperparamsError(f"{where}: {key} = {_short(text)} is not a Python expression ({exc.msg})") from None
+    except (RecursionError, ValueError) as exc:  # nesting too deep, NUL bytes
+        if isinstance(exc, HyperparamsError):
+            raise
+        raise HyperparamsError(f"{where}: {key} = {_short(text)} cannot be parsed ({type(exc).__name__})") from None
     if not isinstance(value, dict):
-        raise HyperparamsError(f"{where}: {key} = {text!r} must be dict(...) or a {{...}} mapping")
+        raise HyperparamsError(f"{where}: {key} = {_short(text)} must be dict(...) or a {{...}} mapping")
     return value
 
 

@@ -88,6 +88,9 @@ def test_kwargs_strings_parse_without_evaluation(text, expected):
     "eval('1')",
     "[1, 2]",
     "dict(a=",
+    "dict(a=" + "[" * 2000 + "]" * 2000 + ")",
+    "dict(a=1)\x00",
+    "dict(a=" + "1, b=" * 3000 + "1)",
 ])
 def test_kwargs_strings_refuse_code(text, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
