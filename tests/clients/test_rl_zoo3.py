@@ -11,13 +11,15 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-import rl_zoo3
-import torch.nn as nn
-from rl_zoo3.exp_manager import ExperimentManager
+from conftest import require
 
-import dobs_envs  # noqa: F401  (registers the dobs_envs/* ids)
-from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR
-from agents.train import resolve_recipe
+rl_zoo3 = require("rl_zoo3")
+import torch.nn as nn  # noqa: E402
+from rl_zoo3.exp_manager import ExperimentManager  # noqa: E402
+
+import dobs_envs  # noqa: E402,F401  (registers the dobs_envs/* ids)
+from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR  # noqa: E402
+from agents.train import resolve_recipe  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
