@@ -1,9 +1,13 @@
 """rl-zoo3 (the real client, ``clients`` extra) on agents/hyperparams/*.yaml: its own CLI trains
 on ``dobs_envs/Tracking-v0`` with our file, and its own reading of every section it would use
-gives the recipe agents/ trains with (one file serves both; issue 9)."""
+gives the recipe agents/ trains with (one file serves both; issue 9).
+
+rl-zoo3 runs in subprocesses only: ``import rl_zoo3`` patches Gymnasium's ``TimeLimit`` for the
+whole process (an extra ``TimeLimit.truncated`` info key), which would leak into other tests."""
 from __future__ import annotations
 
-import argparse
+import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -11,29 +15,29 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import require
 
-rl_zoo3 = require("rl_zoo3")
-import torch.nn as nn  # noqa: E402
-from rl_zoo3.exp_manager import ExperimentManager  # noqa: E402
+from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR
+from agents.train import resolve_recipe
 
-import dobs_envs  # noqa: E402,F401  (registers the dobs_envs/* ids)
-from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR  # noqa: E402
-from agents.train import resolve_recipe  # noqa: E402
+if importlib.util.find_spec("rl_zoo3") is None:  # as conftest.require, without importing it here
+    if os.environ.get("CI"):
+        raise ImportError("rl_zoo3 is missing: .ci/run installs the clients extra")
+    pytest.skip("rl_zoo3 comes with the clients extra: pip install '.[clients]'", allow_module_level=True)
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+HERE = os.path.dirname(os.path.abspath(__file__))
+ENV = dict(os.environ, MPLBACKEND="Agg")
 
 
 def test_rl_zoo3_cli_trains_with_our_file(tmp_path):
     """``python -m rl_zoo3.train ... -conf agents/hyperparams/ppo.yaml`` for 2k steps (one
     PPO rollout of 8 x 512), with the recipe's training-only state bound and [-1, 1] actions."""
+    import torch.nn as nn
     from stable_baselines3 import PPO
 
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "dobs_envs/Tracking-v0",
            "--gym-packages", "dobs_envs", "-conf", os.path.join(HYPERPARAMS_DIR, "ppo.yaml"),
            "-n", "2000", "--seed", "0", "-f", str(tmp_path / "logs"), "--eval-freq", "-1", "--num-threads", "1"]
-    env = dict(os.environ, MPLBACKEND="Agg")
-    proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(cmd, cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "env_kwargs={'state_bound': 30}" in proc.stdout
     run = tmp_path / "logs" / "ppo" / "dobs_envs-Tracking-v0_1"
@@ -44,52 +48,54 @@ def test_rl_zoo3_cli_trains_with_our_file(tmp_path):
     assert model.policy.action_net.in_features == 128 and isinstance(model.policy.mlp_extractor.policy_net[1], nn.Tanh)
 
 
-def _zoo_reading(algo: str, gym_id: str, tmp_path):
-    """What rl-zoo3's ExperimentManager makes of our file for ``gym_id`` (before creating the model)."""
-    em = ExperimentManager(argparse.Namespace(), algo, gym_id, str(tmp_path), config=os.path.join(
-        HYPERPARAMS_DIR, f"{algo}.yaml"))
-    hp, _ = em.read_hyperparameters()
-    hp, env_wrapper, callbacks, vec_env_wrapper = em._preprocess_hyperparams(hp)
-    assert not callbacks and vec_env_wrapper is None
-    return em, hp, env_wrapper
+@pytest.fixture(scope="module")
+def zoo_readings():
+    """rl-zoo3's ExperimentManager reading of every (algo, Gymnasium id), from a subprocess."""
+    proc = subprocess.run([sys.executable, os.path.join(HERE, "rl_zoo3_reading.py")], env=ENV, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 @pytest.mark.parametrize("algo", ALGOS)
 @pytest.mark.parametrize("name", sorted(ENVS))
-def test_rl_zoo3_reads_the_recipe_agents_trains_with(algo, name, tmp_path):
+def test_rl_zoo3_reads_the_recipe_agents_trains_with(algo, name, zoo_readings):
     """rl-zoo3's reading of the section it uses (the Gymnasium id's or ``default``) equals the
     centralised recipe of agents/ (constructor arguments, schedules, activation, envs, budget,
     normalisation, training-only env options, [-1, 1] actions, action noise)."""
     gym_id = ENVS[name][0]
-    em, hp, env_wrapper = _zoo_reading(algo, gym_id, tmp_path)
+    zoo = zoo_readings[f"{algo} {gym_id}"]
     ours = resolve_recipe(algo, name)
-    assert em.n_envs == ours.n_envs and em.n_timesteps == ours.n_timesteps
-    assert em.env_kwargs == ours.train_env_kwargs
-    assert em.eval_env_kwargs == {}  # rl-zoo3 evaluates on the task's own env, as agents/ does
-    assert em.normalize_kwargs == ours.normalize
-    assert hp.pop("policy") == ours.policy
+    assert zoo["n_envs"] == ours.n_envs and zoo["n_timesteps"] == ours.n_timesteps
+    assert zoo["env_kwargs"] == ours.train_env_kwargs
+    assert zoo["eval_env_kwargs"] == {}  # rl-zoo3 evaluates on the task's own env, as agents/ does
+    assert zoo["normalize"] == ours.normalize
+    assert not zoo["callbacks"] and not zoo["vec_env_wrapper"]
 
-    wrapped = env_wrapper(gym.make(gym_id))
     assert ours.normalize_actions
-    assert wrapped.action_space.low.min() == -1.0 and wrapped.action_space.high.max() == 1.0
-    wrapped.close()
+    assert set(zoo["action_low"]) == {-1.0} and set(zoo["action_high"]) == {1.0}
+    assert zoo["env_action_low"] != zoo["action_low"]  # the wrapper did rescale the env's bounds
 
-    noise_type, noise_std = hp.pop("noise_type", None), hp.pop("noise_std", None)
+    kw = dict(zoo["kwargs"])
+    assert kw.pop("policy") == ours.policy
+    noise_type, noise_std = kw.pop("noise_type", None), kw.pop("noise_std", None)
     assert (noise_std if noise_type == "normal" else None) == ours.action_noise_sigma
 
     ours_kw = dict(ours.algo_kwargs)
-    ours_pk, zoo_pk = dict(ours_kw.pop("policy_kwargs")), dict(hp.pop("policy_kwargs"))
-    assert zoo_pk.pop("activation_fn").__name__.lower() == ours_pk.pop("activation_fn")
+    ours_pk, zoo_pk = dict(ours_kw.pop("policy_kwargs")), dict(kw.pop("policy_kwargs"))
+    assert zoo_pk.pop("activation_fn").lower() == ours_pk.pop("activation_fn")
     assert zoo_pk == ours_pk
-    assert set(hp) == set(ours_kw)
+    assert set(kw) == set(ours_kw)
     for key, value in ours_kw.items():
         if key in ("learning_rate", "clip_range"):  # rl-zoo3 wraps every value in a schedule
-            ours_fn = (lambda p, v0=float(value[4:]): p * v0) if isinstance(value, str) else (lambda p, v=value: v)
-            for progress in (1.0, 0.5, 0.1):
-                assert hp[key](progress) == pytest.approx(ours_fn(progress), rel=1e-12)
+            v0 = float(value[4:]) if isinstance(value, str) else None
+            expected = [p * v0 if v0 is not None else value for p in (1.0, 0.5, 0.1)]
+            assert kw[key]["schedule"] == pytest.approx(expected, rel=1e-12), key
         else:
-            assert hp[key] == value, key
+            assert kw[key] == value, key
 
 
-def test_rl_zoo3_version():
-    assert tuple(int(x) for x in rl_zoo3.__version__.split(".")[:2]) >= (2, 9)
+def test_importing_the_suite_leaves_gymnasium_unpatched():
+    """rl-zoo3's TimeLimit patch must not reach this process (see the module doc)."""
+    assert "rl_zoo3" not in sys.modules
+    assert gym.wrappers.TimeLimit.__module__.startswith("gymnasium.")
