@@ -30,10 +30,9 @@ ENV = dict(os.environ, MPLBACKEND="Agg")
 
 def test_rl_zoo3_cli_trains_with_our_file(tmp_path):
     """``python -m rl_zoo3.train ... -conf agents/hyperparams/ppo.yaml`` for 2k steps (one
-    PPO rollout of 8 x 512), with the recipe's training-only state bound and [-1, 1] actions."""
-    import torch.nn as nn
-    from stable_baselines3 import PPO
-
+    PPO rollout of 8 x 512), with the recipe's training-only state bound and [-1, 1] actions.
+    The saved model is inspected in a subprocess too: it pickles rl-zoo3's schedule objects,
+    so loading it imports rl_zoo3."""
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "dobs_envs/Tracking-v0",
            "--gym-packages", "dobs_envs", "-conf", os.path.join(HYPERPARAMS_DIR, "ppo.yaml"),
            "-n", "2000", "--seed", "0", "-f", str(tmp_path / "logs"), "--eval-freq", "-1", "--num-threads", "1"]
@@ -42,10 +41,16 @@ def test_rl_zoo3_cli_trains_with_our_file(tmp_path):
     assert "env_kwargs={'state_bound': 30}" in proc.stdout
     run = tmp_path / "logs" / "ppo" / "dobs_envs-Tracking-v0_1"
     assert (run / "dobs_envs-Tracking-v0" / "vecnormalize.pkl").is_file()
-    model = PPO.load(run / "dobs_envs-Tracking-v0.zip", device="cpu")
-    assert model.num_timesteps >= 2000
-    assert model.action_space == gym.spaces.Box(-1.0, 1.0, (5,), np.float32)
-    assert model.policy.action_net.in_features == 128 and isinstance(model.policy.mlp_extractor.policy_net[1], nn.Tanh)
+    probe = ("import json, sys; from stable_baselines3 import PPO; m = PPO.load(sys.argv[1], device='cpu'); "
+             "print(json.dumps([m.num_timesteps, str(m.action_space), m.policy.action_net.in_features, "
+             "type(m.policy.mlp_extractor.policy_net[1]).__name__]))")
+    proc = subprocess.run([sys.executable, "-c", probe, str(run / "dobs_envs-Tracking-v0.zip")], env=ENV,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    steps, space, width, activation = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert steps >= 2000
+    assert space == str(gym.spaces.Box(-1.0, 1.0, (5,), np.float32))
+    assert (width, activation) == (128, "Tanh")
 
 
 @pytest.fixture(scope="module")
