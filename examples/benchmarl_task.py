@@ -12,9 +12,12 @@ identical agent spaces, so the default task config turns on ``normalized_actions
     from benchmarl.models.mlp import MlpConfig
     from benchmarl_task import DobsEnvsTask
 
+    config = ExperimentConfig.get_from_yaml()
+    config.max_n_frames = 6_000      # one iteration; BenchMARL's default budget is 3 M frames
+    config.loggers = ["csv"]         # the default also logs to wandb
     experiment = Experiment(task=DobsEnvsTask.TRACKING.get_task(), algorithm_config=MappoConfig.get_from_yaml(),
                             model_config=MlpConfig.get_from_yaml(), critic_model_config=MlpConfig.get_from_yaml(),
-                            seed=0, config=ExperimentConfig.get_from_yaml())
+                            seed=0, config=config)
     experiment.run()
 
 ``DobsEnvsTask.TRACKING.get_task({"max_cycles": 100, ...})`` takes any environment options.
