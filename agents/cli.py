@@ -143,7 +143,7 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 
 
 def _train(args) -> int:
-    from .config import EnvNameError, check_env_name
+    from .config import EnvNameError, HyperparamsError, check_env_name
     from .train import default_run_dir, train
 
     if args.resume is not None:
@@ -171,6 +171,8 @@ def _train(args) -> int:
         if "unexpected keyword argument" in str(exc):
             _usage_error(f"--hyperparams: {exc}")
         raise
+    except HyperparamsError as exc:  # names its source: --hyperparams ("overrides") or the recipe file
+        _usage_error(str(exc))
     except KeyboardInterrupt as exc:
         _interrupted(out, exc)
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "

@@ -36,15 +36,15 @@ import numpy as np
 
 from dobs_envs.registry import get as registry_entry
 
-from .config import ENVS, MULTI_AGENT_ALGOS, env_key, gym_factory, load_hyperparams, parallel_factory
+from .config import ACTIVATIONS, ENVS, MULTI_AGENT_ALGOS, env_key, gym_factory, load_hyperparams, parallel_factory
 from .core_vec_env import CoreVecEnv
 from .vec_env import ParallelVecEnv, SlotEncoder
 
 __all__ = ["train", "resume", "resume_point", "load_agent", "TrainedAgent", "TrainingInterrupted", "RunDirError",
-           "read_run_config", "run_files", "build_vec_env", "core_of", "TqdmCallback", "set_threads"]
+           "read_run_config", "run_files", "build_vec_env", "core_of", "TqdmCallback", "set_threads",
+           "Recipe", "resolve_recipe"]
 
-_ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
-_EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "action_noise",
+_EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "noise_type", "noise_std",
                "normalize_actions", "residual_scale", "bc")
 
 
@@ -84,11 +84,80 @@ def _policy_kwargs(pk: dict | None) -> dict:
     pk = dict(pk or {})
     act = pk.get("activation_fn")
     if isinstance(act, str):
-        name = _ACTIVATIONS.get(act.lower())
+        name = ACTIVATIONS.get(act.lower())
         if name is None:
-            raise ValueError(f"unknown activation_fn {act!r}; choose from {sorted(_ACTIVATIONS)}")
+            raise ValueError(f"unknown activation_fn {act!r}; choose from {sorted(ACTIVATIONS)}")
         pk["activation_fn"] = getattr(nn, name)
     return pk
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """What :func:`train` derives from the hyperparameter files (and overrides) for one run.
+
+    ``algo_kwargs``: the algorithm's constructor arguments as written (``lin_`` schedules
+    as strings, ``policy_kwargs.activation_fn`` a name); ``normalize``: ``False`` or the
+    ``VecNormalize`` arguments (``gamma`` included); ``train_env_kwargs``: the recipe's
+    training-only env options; ``bc``: the warm start's ``{episodes, noise, epochs, lr}``
+    (``bc`` variant); ``action_noise_sigma``: TD3/SAC Gaussian action noise.
+    """
+
+    policy: str
+    algo_kwargs: dict
+    n_envs: int
+    n_timesteps: int
+    normalize: Any
+    normalize_actions: bool
+    agent_id: bool
+    train_env_kwargs: dict
+    residual_scale: float | None
+    bc: dict | None
+    action_noise_sigma: float | None
+    hyperparams: dict
+
+    def as_dict(self) -> dict:
+        """Everything but the merged ``hyperparams`` (plain data)."""
+        return {k: v for k, v in self.__dict__.items() if k != "hyperparams"}
+
+
+def resolve_recipe(algo: str, env_name: str, *, multi_agent: bool = False, hybrid: str | None = None,
+                   overrides: dict | None = None) -> Recipe:
+    """The :class:`Recipe` of ``algo`` on ``env_name`` (see :func:`agents.config.load_hyperparams`)."""
+    algo = algo.lower()
+    hp = load_hyperparams(algo, env_name, multi_agent=multi_agent, overrides=overrides, variant=hybrid)
+    return recipe_from_hyperparams(algo, env_name, hp, multi_agent=multi_agent, hybrid=hybrid)
+
+
+def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: bool = False,
+                            hybrid: str | None = None) -> Recipe:
+    """The :class:`Recipe` of the merged hyperparameters ``hp`` (a run's ``config.json``
+    ``hyperparams``, or :func:`agents.config.load_hyperparams`)."""
+    residual_scale = None
+    if hybrid == "residual":
+        residual_scale = hp.get("residual_scale")
+        if residual_scale is None:
+            raise ValueError(f"the residual recipe of {algo} on {env_name!r} needs 'residual_scale' in the "
+                             f"hyperparameters")
+    norm = hp.get("normalize") or False
+    if norm:
+        norm = dict(norm) if isinstance(norm, dict) else {}
+        norm.setdefault("gamma", hp.get("gamma", 0.99))
+    bc = None
+    if hybrid == "bc":
+        b = dict(hp.get("bc") or {})
+        bc = {"episodes": int(b.get("episodes", 20)), "noise": float(b.get("noise", 0.1)),
+              "epochs": int(b.get("epochs", 30)), "lr": float(b.get("lr", 1e-3))}
+    sigma = None
+    if hp.get("noise_type") and algo in ("td3", "sac"):
+        sigma = float(hp.get("noise_std", 0.1))
+    algo_kw = {k: v for k, v in hp.items() if k not in _EXTRA_KEYS}
+    algo_kw["policy_kwargs"] = dict(algo_kw.get("policy_kwargs") or {})
+    return Recipe(policy=hp.get("policy", "MlpPolicy"), algo_kwargs=algo_kw, n_envs=int(hp.get("n_envs", 1)),
+                  n_timesteps=int(hp.get("n_timesteps", 100000)), normalize=norm,
+                  normalize_actions=bool(hp.get("normalize_actions", False)) and residual_scale is None,
+                  agent_id=bool(hp.get("agent_id", False)) and multi_agent,
+                  train_env_kwargs=dict(hp.get("env_kwargs") or {}), residual_scale=residual_scale, bc=bc,
+                  action_noise_sigma=sigma, hyperparams=hp)
 
 
 def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int | None = None,
@@ -304,25 +373,18 @@ class _Setup:
     config: dict
 
 
-def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, hp: dict, timesteps: int,
+def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, recipe: Recipe, timesteps: int,
            seed: int, env_kwargs: dict | None, checkpoint_freq: int | None) -> _Setup:
     """The training VecEnv (normalised when the recipe says so, not yet loaded from a save) and the
-    run's configuration (``config.json``) from the merged hyperparameters ``hp``."""
+    run's configuration (``config.json``) from the ``recipe``."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    n_envs = int(hp.get("n_envs", 1))
     user_kw = dict(env_kwargs or {})
-    kw = dict(hp.get("env_kwargs") or {})
+    kw = dict(recipe.train_env_kwargs)
     kw.update(user_kw)
-    agent_id = bool(hp.get("agent_id", False)) and multi_agent
-    residual_scale = None
-    if hybrid == "residual":
-        residual_scale = hp.get("residual_scale")
-        if residual_scale is None:
-            raise ValueError(f"the residual recipe of {algo} on {name!r} needs 'residual_scale' in the hyperparameters")
-    norm_act = bool(hp.get("normalize_actions", False)) and residual_scale is None
-    venv = build_vec_env(env, multi_agent=multi_agent, n_envs=n_envs, seed=seed, env_kwargs=kw, agent_id=agent_id,
-                         normalize_actions=norm_act, residual_scale=residual_scale)
+    agent_id, residual_scale, norm_act = recipe.agent_id, recipe.residual_scale, recipe.normalize_actions
+    venv = build_vec_env(env, multi_agent=multi_agent, n_envs=recipe.n_envs, seed=seed, env_kwargs=kw,
+                         agent_id=agent_id, normalize_actions=norm_act, residual_scale=residual_scale)
     if norm_act and not multi_agent:  # the env's own bounds, for evaluation
         inner = venv.unwrapped
         inner_space = inner.env_action_space if isinstance(inner, CoreVecEnv) else inner.envs[0].unwrapped.action_space
@@ -330,34 +392,31 @@ def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, 
     else:
         act_low = act_high = None
     n_agents = venv.unwrapped.n_agents if multi_agent else 1
-    norm = hp.get("normalize") or False
+    norm = recipe.normalize
     if norm:
-        nk = dict(norm) if isinstance(norm, dict) else {}
-        nk.setdefault("gamma", hp.get("gamma", 0.99))
-        venv = VecNormalize(venv, **nk)
+        venv = VecNormalize(venv, **norm)
     ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
     config = {
         "env": name, "algo": algo, "multi_agent": multi_agent, "hybrid": hybrid, "residual_scale": residual_scale,
         "bc": None, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
         "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
         "env_kwargs": user_kw, "train_env_kwargs": kw, "normalize": bool(norm), "checkpoint_freq": ckpt,
-        "hyperparams": {k: v for k, v in hp.items()},
+        "hyperparams": dict(recipe.hyperparams),
     }
     return _Setup(venv=venv, n_agents=n_agents, config=config)
 
 
-def _algo_kwargs(algo: str, hp: dict, venv) -> dict:
+def _algo_kwargs(recipe: Recipe, venv) -> dict:
     from stable_baselines3.common.noise import NormalActionNoise
 
-    algo_kw = {k: v for k, v in hp.items() if k not in _EXTRA_KEYS}
+    algo_kw = dict(recipe.algo_kwargs)
     algo_kw["policy_kwargs"] = _policy_kwargs(algo_kw.get("policy_kwargs"))
     for key in ("learning_rate", "clip_range"):
         if key in algo_kw:
             algo_kw[key] = _schedule(algo_kw[key])
-    noise = hp.get("action_noise")
-    if noise and algo in ("td3", "sac"):
+    if recipe.action_noise_sigma is not None:
         d = venv.action_space.shape[0]
-        algo_kw["action_noise"] = NormalActionNoise(np.zeros(d), float(noise.get("sigma", 0.1)) * np.ones(d))
+        algo_kw["action_noise"] = NormalActionNoise(np.zeros(d), recipe.action_noise_sigma * np.ones(d))
     return algo_kw
 
 
@@ -453,23 +512,22 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     if hybrid == "bc" and (algo != "ppo" or multi_agent):
         raise ValueError("the behaviour-cloning warm start is implemented for centralised PPO (algo='ppo')")
     name = env_name or (env if isinstance(env, str) else "default")
-    hp = load_hyperparams(algo, name, multi_agent=multi_agent, overrides=hyperparams, variant=hybrid)
+    recipe = resolve_recipe(algo, name, multi_agent=multi_agent, hybrid=hybrid, overrides=hyperparams)
     set_threads(threads)
-    timesteps = int(timesteps if timesteps is not None else hp.get("n_timesteps", 100000))
-    s = _setup(env, name, algo, multi_agent=multi_agent, hybrid=hybrid, hp=hp, timesteps=timesteps, seed=seed,
-               env_kwargs=env_kwargs, checkpoint_freq=checkpoint_freq)
+    timesteps = int(timesteps if timesteps is not None else recipe.n_timesteps)
+    s = _setup(env, name, algo, multi_agent=multi_agent, hybrid=hybrid, recipe=recipe, timesteps=timesteps,
+               seed=seed, env_kwargs=env_kwargs, checkpoint_freq=checkpoint_freq)
     out = out or default_run_dir(name, algo, multi_agent, seed)
     os.makedirs(out, exist_ok=True)
     _clear_run(out)
-    model = _algo_class(algo)(hp.get("policy", "MlpPolicy"), s.venv, seed=seed, verbose=verbose,
-                              tensorboard_log=tensorboard, **_algo_kwargs(algo, hp, s.venv))
+    model = _algo_class(algo)(recipe.policy, s.venv, seed=seed, verbose=verbose,
+                              tensorboard_log=tensorboard, **_algo_kwargs(recipe, s.venv))
     if hybrid == "bc":
-        bc = dict(hp.get("bc") or {})
+        bc = recipe.bc
         kw = s.config["train_env_kwargs"]
-        data = behaviour_cloning_dataset(gym_factory(env, kw), int(bc.get("episodes", 20)), seed=10_000_000 + seed,
-                                         noise=float(bc.get("noise", 0.1)))
-        s.config["bc"] = pretrain_ppo(model, data, epochs=int(bc.get("epochs", 30)), lr=float(bc.get("lr", 1e-3)),
-                                      seed=seed)
+        data = behaviour_cloning_dataset(gym_factory(env, kw), bc["episodes"], seed=10_000_000 + seed,
+                                         noise=bc["noise"])
+        s.config["bc"] = pretrain_ppo(model, data, epochs=bc["epochs"], lr=bc["lr"], seed=seed)
     return _learn(model, s.venv, s.config, out, progress=progress, callbacks=callbacks)
 
 
@@ -538,15 +596,17 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     name = check_env_name(cfg["env"], multi_agent=bool(cfg["multi_agent"]), allow_custom=allow_custom_env,
                           what="the run's environment (config.json 'env')")
     set_threads(threads)
-    algo, hp, n_agents = cfg["algo"], dict(cfg["hyperparams"]), int(cfg["n_agents"])
+    algo, n_agents = cfg["algo"], int(cfg["n_agents"])
+    recipe = recipe_from_hyperparams(algo, name, dict(cfg["hyperparams"]), multi_agent=bool(cfg["multi_agent"]),
+                                     hybrid=cfg.get("hybrid"))
     seed = int(cfg["seed"]) + point.sb3_timesteps // n_agents
-    s = _setup(name, name, algo, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), hp=hp,
+    s = _setup(name, name, algo, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), recipe=recipe,
                timesteps=int(cfg["timesteps"]), seed=seed, env_kwargs=cfg.get("env_kwargs"),
                checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))
     venv = s.venv
     if point.vecnormalize is not None:
         venv = VecNormalize.load(point.vecnormalize, venv.venv)
-    kw = _algo_kwargs(algo, hp, venv)
+    kw = _algo_kwargs(recipe, venv)
     custom = {k: kw[k] for k in ("learning_rate", "clip_range") if k in kw}  # rebuilt, not unpickled closures
     model = _algo_class(algo).load(point.model, env=venv, device="auto", custom_objects=custom,
                                    tensorboard_log=tensorboard, verbose=verbose)

@@ -93,6 +93,12 @@ def test_train_unknown_hyperparameter_is_named(tmp_path, capsys):
     assert "learning_rte" in err
 
 
+def test_train_refuses_code_in_hyperparams(tmp_path, capsys):
+    err = _exit2(["train", "--out", str(tmp_path / "o"), "--no-progress", "--timesteps", "8",
+                  "--hyperparams", '{"policy_kwargs": "dict(net_arch=open(\'x\'))"}'], capsys)
+    assert "--hyperparams" in err and "policy_kwargs" in err and "never evaluates code" in err
+
+
 def test_train_refuses_to_overwrite(run_dir, tmp_path, capsys):
     f = tmp_path / "file"
     f.write_text("x")

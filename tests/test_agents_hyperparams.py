@@ -1,0 +1,147 @@
+"""The hyperparameter files: rl-zoo3's format read without evaluating anything, and the
+recipes agents/ derives from them unchanged by the move to that format (issue 9).
+
+rl-zoo3's own reading of the same files is tested against the real client in
+tests/clients/test_rl_zoo3.py."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from agents.config import (ALGOS, ENVS, HYPERPARAMS_DIR, HyperparamsError, load_hyperparams, parse_kwargs_string,
+                           read_hyperparams_file)
+from agents.train import _policy_kwargs, resolve_recipe
+
+FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes_ecaeb14.json")
+
+
+def _case(key: str):
+    algo, env, *rest = key.split()
+    variant = next((r for r in rest if r != "ma"), None)
+    return algo, env, "ma" in rest, variant
+
+
+def _plain(recipe) -> dict:
+    d = recipe.as_dict()
+    pk = _policy_kwargs(d["algo_kwargs"]["policy_kwargs"])
+    if "activation_fn" in pk:
+        pk["activation_fn"] = pk["activation_fn"].__name__
+    d["algo_kwargs"]["policy_kwargs"] = pk
+    return json.loads(json.dumps(d))
+
+
+with open(FROZEN) as _fh:
+    _RECIPES = json.load(_fh)["recipes"]
+
+
+@pytest.mark.parametrize("key", sorted(_RECIPES))
+def test_recipes_unchanged(key):
+    """Every (algo, env, shared, hybrid) recipe equals what the pre-rl-zoo3 files gave."""
+    algo, env, ma, variant = _case(key)
+    assert _plain(resolve_recipe(algo, env, multi_agent=ma, hybrid=variant)) == _RECIPES[key]
+
+
+def test_frozen_recipes_cover_every_env_and_mode():
+    cases = {_case(k) for k in _RECIPES}
+    for env in ENVS:
+        for algo, ma, variant in [("ppo", False, None), ("ppo", True, None), ("ppo", False, "residual"),
+                                  ("ppo", True, "residual"), ("ppo", False, "bc"), ("sac", False, None),
+                                  ("sac", True, None), ("td3", False, None)]:
+            assert (algo, env, ma, variant) in cases
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_shipped_files_are_valid(algo):
+    table = read_hyperparams_file(os.path.join(HYPERPARAMS_DIR, f"{algo}.yaml"))
+    assert "default" in table
+
+
+def test_centralised_recipe_is_the_section_rl_zoo3_reads():
+    """Each Gymnasium-id section is complete: the layered lookup gives that section alone."""
+    table = read_hyperparams_file(os.path.join(HYPERPARAMS_DIR, "ppo.yaml"))
+    for name, (gid, _) in ENVS.items():
+        assert gid in table
+        assert load_hyperparams("ppo", name) == table[gid]
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("dict(net_arch=[64, 64], activation_fn=nn.Tanh, log_std_init=-3.0)",
+     {"net_arch": [64, 64], "activation_fn": "tanh", "log_std_init": -3.0}),
+    ("dict(net_arch=dict(pi=[32], vf=[64]), activation_fn=th.nn.ReLU, ortho_init=False)",
+     {"net_arch": {"pi": [32], "vf": [64]}, "activation_fn": "relu", "ortho_init": False}),
+    ("{'net_arch': (8,), 'activation_fn': torch.nn.ELU}", {"net_arch": (8,), "activation_fn": "elu"}),
+])
+def test_kwargs_strings_parse_without_evaluation(text, expected):
+    assert parse_kwargs_string(text, "f.yaml, section 'default'", "policy_kwargs") == expected
+
+
+@pytest.mark.parametrize("text", [
+    "__import__('os').system('touch PWNED')",
+    "dict(activation_fn=nn.Module)",
+    "dict(optimizer_class=th.optim.Adam)",
+    "dict(net_arch=[64] * 2)",
+    "dict(x=(lambda: 1)())",
+    "dict(**{'a': 1})",
+    "dict(a=().__class__)",
+    "eval('1')",
+    "[1, 2]",
+    "dict(a=",
+    "dict(a=" + "[" * 2000 + "]" * 2000 + ")",
+    "dict(a=1)\x00",
+    "dict(a=" + "1, b=" * 3000 + "1)",
+])
+def test_kwargs_strings_refuse_code(text, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(HyperparamsError, match="policy_kwargs"):
+        parse_kwargs_string(text, "f.yaml, section 'default'", "policy_kwargs")
+    assert not (tmp_path / "PWNED").exists()
+
+
+def _write(tmp_path, text: str) -> str:
+    path = tmp_path / "ppo.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+BASE = """default: &default
+  policy: MlpPolicy
+  n_timesteps: 1000
+  policy_kwargs: "dict(net_arch=[8], activation_fn=nn.Tanh)"
+"""
+
+
+@pytest.mark.parametrize("extra, match", [
+    ('"dobs_envs/Tracking-v0":\n  n_envs: 2\n', r"lacks \['n_timesteps', 'policy', 'policy_kwargs'\].*<<: \*default"),
+    ('"dobs_envs/Tracking-v0":\n  <<: *default\n  agent_id: true\n', "'agent_id' is read by agents/ only"),
+    ("default-ma:\n  env_wrapper: [{my.module.Wrapper: {}}]\n", "env_wrapper .* not accepted"),
+    ("default-ma:\n  env_wrapper: [{gymnasium.wrappers.RescaleAction: {min_action: 0, max_action: 1}}]\n",
+     "env_wrapper .* not accepted"),
+    ('"dobs_envs/Tracking-v0":\n  <<: *default\n  policy: my.module.Policy\n', "dotted names"),
+    ("default-ma:\n  callback: my.module.Callback\n", "'callback' is an rl-zoo3 option"),
+    ("default-ma:\n  normalize: \"__import__('os')\"\n", "normalize"),
+    ('"dobs_envs/Tracking-v0":\n  <<: *default\n  policy_kwargs: {activation_fn: tanh}\n', "string form"),
+    ("default-ma:\n  noise_type: ornstein-uhlenbeck\n", "noise_type"),
+    ("default-ma: [1, 2]\n", "must be a mapping"),
+])
+def test_file_errors_name_the_section_and_key(tmp_path, extra, match):
+    path = _write(tmp_path, BASE + extra)
+    with pytest.raises(HyperparamsError, match=match) as info:
+        read_hyperparams_file(path)
+    assert path in str(info.value)
+
+
+def test_rescale_wrapper_means_normalized_actions(tmp_path):
+    path = _write(tmp_path, BASE + "  env_wrapper:\n    - gymnasium.wrappers.RescaleAction: "
+                                   "{min_action: -1, max_action: 1}\ndefault-residual:\n  env_wrapper: null\n")
+    table = read_hyperparams_file(path)
+    assert table["default"]["normalize_actions"] is True and "env_wrapper" not in table["default"]
+    assert table["default-residual"]["normalize_actions"] is False
+
+
+def test_overrides_accept_both_vocabularies():
+    hp = load_hyperparams("ppo", "tracking", overrides={"policy_kwargs": "dict(net_arch=[8], activation_fn=nn.ReLU)"})
+    assert hp["policy_kwargs"] == {"net_arch": [8], "activation_fn": "relu", "log_std_init": -2.0}
+    with pytest.raises(HyperparamsError, match=r"hyperparameter overrides \(--hyperparams\): policy_kwargs"):
+        load_hyperparams("ppo", "tracking", overrides={"policy_kwargs": "dict(a=open('x'))"})
