@@ -185,7 +185,24 @@ def add_parser(sub) -> None:
     p.add_argument("--workers", type=int, choices=[1, 2, 4, 8], default=2,
                    help="processes running the cells of a study (default 2)")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of a previous run in --out (refused otherwise)")
     p.set_defaults(func=_run, parser=p)
+
+
+def _check_out(args) -> None:
+    """Usage error (exit 2) when ``--out`` is a file or already holds this command's results."""
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        args.parser.error(f"--out {args.out!r} is a file, not a directory")
+    if args.scenario in STUDIES:
+        targets = [os.path.join(args.out, f"{args.scenario}.json")]
+    else:
+        names = list(PAPER_SCENARIOS) if args.scenario == "all" else [args.scenario]
+        targets = [os.path.join(args.out, n, "metrics.json") for n in names]
+    done = [t for t in targets if os.path.exists(t)]
+    if done and not args.overwrite:
+        args.parser.error(f"--out {args.out!r} already holds results ({done[0]}); pass --overwrite to replace them "
+                          "or choose another --out")
 
 
 def _run_study(args) -> int:
@@ -211,6 +228,7 @@ def _run_study(args) -> int:
 
 
 def _run(args) -> int:
+    _check_out(args)
     if args.scenario in STUDIES:
         return _run_study(args)
     names = list(PAPER_SCENARIOS) if args.scenario == "all" else [args.scenario]

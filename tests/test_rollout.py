@@ -112,3 +112,22 @@ def test_cli_study_rejects_step_options(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--dt does not apply" in err
+
+
+def test_cli_reproduce_refuses_to_overwrite_a_previous_run(tmp_path, capsys):
+    out = tmp_path / "paper"
+    assert main(["reproduce", "ne2", "--out", str(out), "--t-end", "0.2", "--no-progress"]) == 0
+    first = (out / "ne2" / "metrics.json").read_text()
+    with pytest.raises(SystemExit) as exc:
+        main(["reproduce", "ne2", "--out", str(out), "--t-end", "0.3", "--no-progress"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--overwrite" in err and "metrics.json" in err
+    assert (out / "ne2" / "metrics.json").read_text() == first  # untouched
+    assert main(["reproduce", "ne2", "--out", str(out), "--t-end", "0.3", "--no-progress", "--overwrite"]) == 0
+    assert json.loads((out / "ne2" / "metrics.json").read_text())["t_end"] == pytest.approx(0.3)
+    afile = tmp_path / "a_file"
+    afile.write_text("x")
+    with pytest.raises(SystemExit) as exc:
+        main(["reproduce", "ne2", "--out", str(afile)])
+    assert exc.value.code == 2 and "is a file" in capsys.readouterr().err
