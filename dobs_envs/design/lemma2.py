@@ -336,7 +336,7 @@ def _balancing_exponents(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndar
 # the algorithm
 # ---------------------------------------------------------------------------
 def strong_detectability(
-    A, B_unknown, C, *, tol: float | None = None, margin: float = DEFAULT_MARGIN
+    A, B_unknown, C, *, tol: float | None = None, margin: float = DEFAULT_MARGIN, poles=None
 ) -> StrongDetectability:
     r"""Lemma 2 (FUIO): maximal functional unknown-input observer of ``(A, B_unknown, C)``.
 
@@ -368,6 +368,16 @@ def strong_detectability(
         unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
         part of the step-6 pair, :func:`_stabilising_injection`) is shifted by
         ``margin``; the fixed (unobservable, stable) modes keep their values.
+    poles : array_like, optional
+        Pin the assignable eigenvalues of ``E`` instead of the ARE's choice:
+        one value per mode of the observable part of the step-6 pair (complex
+        values in conjugate pairs, every ``Re < 0``, in the time unit of ``A``),
+        placed with :func:`scipy.signal.place_poles` on ``(A_o, C_o)``. The
+        other eigenvalues of ``E`` are not free: the fixed (stable,
+        unobservable) modes of the pair and ``-margin`` for each row of ``C``
+        outside ``Im T_d`` (those functionals are measured). A wrong count
+        raises ``ValueError`` stating how many are assignable; nodes with
+        ``E = 0`` have none.
 
     Returns
     -------
@@ -523,6 +533,7 @@ def strong_detectability(
             "margin / ||A|| is not representable in double precision, and so would the observer "
             "gains be; rescale time (A -> A / s, margin -> margin / s)"
         )
+    poles1 = None if poles is None else _check_poles(poles) * np.ldexp(1.0, -ka)  # in the time unit of A1 (exact)
     # ... then a diagonal state-coordinate balancing x = D x_b, D = diag(2^kd); when it
     # changes anything and its result fails the checks, the unbalanced data are tried
     # (a smaller subspace from the unbalanced data is not accepted: it would not be maximal)
@@ -531,7 +542,8 @@ def strong_detectability(
     first_exc = None
     for k_bal in attempts:
         try:
-            T_d, E, F, G, in_rowC = _attempt(A0, B0, C0, A1, B1, C1, k_bal, ka, kc, tol, margin, margin1)
+            T_d, E, F, G, in_rowC = _attempt(A0, B0, C0, A1, B1, C1, k_bal, ka, kc, tol, margin, margin1,
+                                             poles1)
         except IllConditionedError as exc:
             first_exc = first_exc or exc
             continue
@@ -548,7 +560,7 @@ def strong_detectability(
     return out
 
 
-def _attempt(A0, B0, C0, A1, B1, C1, kd, ka, kc, tol, margin, margin1):
+def _attempt(A0, B0, C0, A1, B1, C1, kd, ka, kc, tol, margin, margin1, poles1=None):
     """One design of the prescaled data ``(A1, B1, C1)``, balanced by ``D = diag(2^kd)``
     unless ``kd`` is None, mapped back to the caller's coordinates and checked there.
 
@@ -563,7 +575,7 @@ def _attempt(A0, B0, C0, A1, B1, C1, kd, ka, kc, tol, margin, margin1):
         # overflow / NaN are not trapped here (scipy relies on IEEE semantics internally):
         # they end in a LinAlgError below or in the finiteness and residual checks
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            T_d, E, F, G, in_rowC = _fuio(A1, B1, C1, tol, margin1)
+            T_d, E, F, G, in_rowC = _fuio(A1, B1, C1, tol, margin1, poles1)
             delta = T_d.shape[1]
             # ---- undo the balancing: T_b^T x_b = T_b^T D^-1 x, re-orthonormalised ----
             if kd is not None and delta:
@@ -625,7 +637,38 @@ def _finish(A0, B0, C0, T_d, E, F, G, in_rowC, ka, kc, margin):
     return T_d, E, F, G, in_rowC
 
 
-def _fuio(A0, B0, C0, tol, margin):
+def _check_poles(poles) -> np.ndarray:
+    """``poles`` as a 1-D complex array: finite, ``Re < 0``, closed under conjugation."""
+    try:
+        P = np.asarray(poles, dtype=complex).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"poles must be an array of numbers, got {poles!r}") from None
+    if not np.all(np.isfinite(P)) or np.any(P.real >= 0):
+        raise ValueError(f"poles must be finite with negative real parts (E Hurwitz), got {P.tolist()}")
+    if not np.allclose(np.sort_complex(P), np.sort_complex(P.conj()), rtol=1e-12, atol=0.0):
+        raise ValueError(f"poles must come in complex-conjugate pairs (E is real), got {P.tolist()}")
+    return P
+
+
+def _placed_injection(Ao: np.ndarray, Co: np.ndarray, poles: np.ndarray, n_fixed: int, kc: int) -> np.ndarray:
+    """``J_o`` with ``eig(Ao + J_o Co) = poles`` (:func:`scipy.signal.place_poles` on the dual pair)."""
+    from scipy.signal import place_poles
+
+    ro = Ao.shape[0]
+    if poles.size != ro:
+        raise ValueError(
+            f"poles: this node's E has {ro} assignable eigenvalue(s) (the observable part of the "
+            f"step-6 pair), besides {n_fixed} fixed unobservable mode(s) and up to {kc} at -margin for "
+            f"the measured rows of C; got {poles.size} pole(s)"
+        )
+    try:
+        K = place_poles(Ao.T, Co.T, poles).gain_matrix
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise ValueError(f"poles: cannot place {poles.tolist()} on this node's observable pair ({exc})") from None
+    return -K.T
+
+
+def _fuio(A0, B0, C0, tol, margin, poles=None):
     """Steps 1-8 on prescaled, balanced data; returns ``(T_d, E, F, G, in_rowC)``
     in the data's units (``in_rowC``: the ``E = 0`` branch)."""
     n = A0.shape[0]
@@ -751,7 +794,12 @@ def _fuio(A0, B0, C0, tol, margin):
             Pi3d = s_t * (P_d.T @ Pi3 @ P_d)
             Pi4d = Q4 @ P_d  # orthonormal rows since Q4 P_u = 0
             J2 = np.zeros((r_d, Pi4d.shape[0]))
-            if Pi4d.shape[0] and r_o:
+            if poles is not None:  # pinned eigenvalues, in the working time unit
+                if r_o and Pi4d.shape[0]:
+                    J2[:r_o] = _placed_injection(Pi3d[:r_o, :r_o], Pi4d[:, :r_o], poles / t_unit, r_d - r_o, p)
+                elif poles.size:
+                    _placed_injection(np.zeros((0, 0)), np.zeros((0, 0)), poles, r_d - r_o, p)
+            elif Pi4d.shape[0] and r_o:
                 J2[:r_o] = _stabilising_injection(Pi3d[:r_o, :r_o], Pi4d[:, :r_o], alpha, margin / a_scale)
             E_dyn = Pi3d + J2 @ Pi4d
             Kt = np.hstack([s_t * Kt[:, :p], Kt[:, p:]])
@@ -773,6 +821,11 @@ def _fuio(A0, B0, C0, tol, margin):
     else:
         kc, in_rowC = p, True
 
+    if in_rowC and poles is not None and poles.size:
+        raise ValueError(
+            f"poles: this node's reconstructible functionals are all measured (E = 0 branch, "
+            f"T_id^T = G C): E has no assignable eigenvalues; got {poles.size} pole(s)"
+        )
     if in_rowC:
         # E = 0 branch: T_id^T = G C (the step-6 functionals are measured)
         T_d = Cq.T.copy()

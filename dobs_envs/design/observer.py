@@ -302,6 +302,7 @@ def design_distributed_observer(
     B_v=None,
     *,
     tol: float | None = None,
+    poles=None,
 ) -> ObserverDesign:
     """Design the ``N`` observer nodes of eq. (``obidynamic``) with gains (``barEFGB``).
 
@@ -325,6 +326,11 @@ def design_distributed_observer(
     tol : float, optional
         Absolute SVD threshold passed to
         :func:`~dobs_envs.design.lemma2.strong_detectability`.
+    poles : mapping int -> array_like, optional
+        ``{i: eigenvalues}``: pin the assignable eigenvalues of node ``i``'s ``E_i``
+        (0-based node index; see ``poles`` of
+        :func:`~dobs_envs.design.lemma2.strong_detectability`); the other nodes keep
+        the default choice (shifted ARE). The paper leaves ``E_i`` free beyond Hurwitz.
 
     Returns
     -------
@@ -383,11 +389,16 @@ def design_distributed_observer(
     # synchronisation there (a 100x100 SVD measured 55 ms with 2 OpenBLAS threads
     # on a loaded 2-core machine vs 4 ms with one), so the per-node loop runs
     # single-threaded.
+    poles = {} if poles is None else dict(poles)
+    bad = [k for k in poles if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer))
+           or not 0 <= k < N]
+    if bad:
+        raise ValueError(f"poles: keys must be node indices 0..{N - 1}, got {bad}")
     with threadpool_limits(limits=1, user_api="blas"):
         for i in range(N):
             B_minus = np.hstack([B[:, ~known_mask[i]], B_v])  # eq. (splitinput)
             try:
-                results.append(strong_detectability(A, B_minus, C_list[i], tol=tol))
+                results.append(strong_detectability(A, B_minus, C_list[i], tol=tol, poles=poles.get(i)))
             except ValueError as exc:
                 cls = IllConditionedError if isinstance(exc, IllConditionedError) else ValueError
                 raise cls(f"node {i}: Lemma 2 (strong_detectability) failed: {exc}") from exc
