@@ -131,3 +131,8 @@ def test_cli_reproduce_refuses_to_overwrite_a_previous_run(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["reproduce", "ne2", "--out", str(afile)])
     assert exc.value.code == 2 and "is a file" in capsys.readouterr().err
+
+
+def test_study_cells_in_worker_processes_match_the_serial_run():
+    kw = dict(dts=(1e-3, 5e-4), scenarios=("ne1",), t_end=6.0)
+    assert convergence_study(None, workers=2, **kw) == convergence_study(None, workers=1, **kw)

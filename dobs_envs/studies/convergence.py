@@ -13,13 +13,11 @@ and of the task error, with the least-squares slope of ``log(error)`` against ``
 """
 from __future__ import annotations
 
-import json
-import os
-
 import numpy as np
 
 from ..rollout import rollout, window_stats
 from ..scenarios.paper import PAPER_SCENARIOS
+from ._common import run_cells, write_results
 
 __all__ = ["DTS", "SCENARIOS", "convergence_study", "fit_slope"]
 
@@ -78,17 +76,7 @@ def convergence_study(out: str | None = None, *, dts=DTS, scenarios=SCENARIOS, t
     if unknown:
         raise ValueError(f"unknown scenarios {unknown}; choose from {sorted(PAPER_SCENARIOS)}")
     cells = [(s, d) for s in scenarios for d in dts]
-    if workers > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        # the longest runs (smallest dt) first
-        order = sorted(range(len(cells)), key=lambda i: cells[i][1])
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
-            futs = {i: ex.submit(_run, *cells[i], t_end) for i in order}
-            runs = [futs[i].result() for i in range(len(cells))]
-    else:
-        runs = [_run(s, d, t_end) for s, d in cells]
+    runs = run_cells(_run, [(s, d, t_end) for s, d in cells], workers)
     res = {"dts": dts, "sample_spacing_s": SAMPLE, "scenarios": {}}
     for s in scenarios:
         rs = [r for (name, _), r in zip(cells, runs) if name == s]
@@ -99,12 +87,7 @@ def convergence_study(out: str | None = None, *, dts=DTS, scenarios=SCENARIOS, t
             for stat in ("rms", "peak"):
                 slopes[f"{key}.{stat}"] = fit_slope(dts, [r[key][stat] for r in rs])
         res["scenarios"][s] = {"runs": rs, "slopes": slopes}
-    if out is not None:
-        os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, "convergence.json"), "w") as fh:
-            json.dump(res, fh, indent=2)
-        if plot:
-            _plot(res, os.path.join(out, "convergence.png"))
+    write_results(res, out, "convergence", _plot if plot else None)
     return res
 
 

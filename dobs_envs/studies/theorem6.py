@@ -21,13 +21,11 @@ estimation errors cost.
 """
 from __future__ import annotations
 
-import json
-import os
-
 import numpy as np
 
 from ..rollout import rollout, window_stats
 from ..scenarios.paper import ne3
+from ._common import run_cells, write_results
 
 __all__ = ["EPSILONS", "GAIN_SCALES", "theorem6_study"]
 
@@ -104,24 +102,12 @@ def theorem6_study(out: str | None = None, *, epsilons=EPSILONS, gain_scales=GAI
         raise ValueError(f"need 0 < dt_min <= dt0, got dt_min={dt_min!r}, dt0={dt0!r}")
     jobs = [(s, tuple(epsilons), o, t_end, dt0, dt_min) for o in ((False, True) if oracle else (False,))
             for s in gain_scales]
-    if workers > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
-            rows = list(ex.map(_scale_row, *zip(*jobs)))
-    else:
-        rows = [_scale_row(*j) for j in jobs]
+    rows = run_cells(_scale_row, jobs, workers)
     res = {"scenario": "ne3", "printed": list(PRINTED), "epsilons": list(epsilons), "gain_scales": list(gain_scales),
            "t_end": t_end, "rtol": RTOL, "atol": ATOL, "dt0": dt0, "dt_min": dt_min,
            "observer_based": [c for (s, e, o, *_), r in zip(jobs, rows) if not o for c in r],
            "oracle": [c for (s, e, o, *_), r in zip(jobs, rows) if o for c in r] if oracle else None}
-    if out is not None:
-        os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, "theorem6.json"), "w") as fh:
-            json.dump(res, fh, indent=2)
-        if plot:
-            _plot(res, os.path.join(out, "theorem6.png"))
+    write_results(res, out, "theorem6", _plot if plot else None)
     return res
 
 
