@@ -142,31 +142,46 @@ def _episode_payload(res) -> dict:
             "estimation_error": [r.estimation_error.tolist() for r in res]}
 
 
+def _finished_run(path: str, sig: dict, hyperparams: dict) -> dict | None:
+    """The stored result of the run in ``path`` if it finished with this signature *and* was trained
+    with these merged hyperparameters (its ``config.json``): editing a recipe file retrains the
+    affected runs instead of reusing results of the old recipe. None otherwise."""
+    try:
+        with open(os.path.join(path, "result.json")) as fh:
+            prev = json.load(fh)
+        with open(os.path.join(path, "config.json")) as fh:
+            trained_with = json.load(fh).get("hyperparams")
+    except (OSError, ValueError):
+        return None
+    if prev.get("signature") != sig or trained_with != json.loads(json.dumps(hyperparams)):
+        return None
+    prev["cached"] = True
+    return prev
+
+
 def _train_and_evaluate(spec: dict) -> dict:
     """Train one (agent, seed) (or reuse a finished identical run) and evaluate it. Runs in a worker."""
     from .curves import make_curve_callback
-    from .train import load_agent, set_threads, train
+    from .train import load_agent, resolve_recipe, set_threads, train
 
     set_threads(spec["threads"])
     path = spec["path"]
     done_path = os.path.join(path, "result.json")
     sig = _run_signature(spec)
-    if os.path.exists(done_path):
-        with open(done_path) as fh:
-            prev = json.load(fh)
-        if prev.get("signature") == sig:
-            prev["cached"] = True
-            return prev
     a = AGENTS[spec["agent"]]
+    hp = dict(spec["hp"])
+    if a.train_env_kwargs:
+        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
+    prev = _finished_run(path, sig, resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
+                                                   overrides=hp or None).hyperparams)
+    if prev is not None:
+        return prev
     env, env_kwargs = spec["env"], spec["env_kwargs"]
     steps = spec["steps"]
     os.makedirs(path, exist_ok=True)
     n_agents = len(parallel_factory(env, env_kwargs)().possible_agents) if a.multi_agent else 1
     curve = make_curve_callback(env, env_kwargs, spec["curve_seeds"], spec["curve_every"], n_agents=n_agents,
                                 path=os.path.join(path, "curve.json"))
-    hp = dict(spec["hp"])
-    if a.train_env_kwargs:
-        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
     t0 = time.perf_counter()
     train(env, a.algo, multi_agent=a.multi_agent, timesteps=steps, seed=spec["seed"], out=path, progress=False,
           hyperparams=hp or None, env_kwargs=env_kwargs, hybrid=a.hybrid, callbacks=[curve], checkpoint_freq=0)

@@ -91,6 +91,29 @@ def test_cli_reuses_finished_runs(tiny_run, capsys):
     assert all(v == 0.0 for secs in doc["train_seconds"].values() for v in secs)
 
 
+def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
+    """A cached result counts only if its run was trained with today's merged hyperparameters:
+    editing a recipe file must retrain, never silently reuse the old recipe's result."""
+    import shutil
+
+    from agents.benchmark import _finished_run
+    from agents.train import resolve_recipe
+
+    out, _, _ = tiny_run
+    run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")
+    sig = json.load(open(os.path.join(run, "result.json")))["signature"]
+    hp = dict(TINY["hyperparams"]["ppo"])
+    today = resolve_recipe("ppo", "tracking", overrides=hp).hyperparams
+    assert _finished_run(run, sig, today)["cached"] is True
+    edited = resolve_recipe("ppo", "tracking", overrides={**hp, "learning_rate": 1e-4}).hyperparams
+    assert _finished_run(run, sig, edited) is None
+    assert _finished_run(run, {**sig, "seed": 99}, today) is None
+    copy = str(tmp_path / "run")
+    shutil.copytree(run, copy)
+    os.remove(os.path.join(copy, "config.json"))
+    assert _finished_run(copy, sig, today) is None
+
+
 @pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"]])
 def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
