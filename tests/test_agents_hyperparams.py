@@ -1,5 +1,6 @@
 """The hyperparameter files: rl-zoo3's format read without evaluating anything, and the
-recipes agents/ derives from them unchanged by the move to that format (issue 9).
+recipes agents/ derives from them frozen (tests/data/recipes.json: unchanged by the move to that
+format, issue 9; a deliberate recipe change edits that file in the same commit).
 
 rl-zoo3's own reading of the same files is tested against the real client in
 tests/clients/test_rl_zoo3.py."""
@@ -14,7 +15,7 @@ from agents.config import (ALGOS, ENVS, HYPERPARAMS_DIR, HyperparamsError, load_
                            read_hyperparams_file)
 from agents.train import _policy_kwargs, resolve_recipe
 
-FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes_ecaeb14.json")
+FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes.json")
 
 
 def _case(key: str):
@@ -38,7 +39,7 @@ with open(FROZEN) as _fh:
 
 @pytest.mark.parametrize("key", sorted(_RECIPES))
 def test_recipes_unchanged(key):
-    """Every (algo, env, shared, hybrid) recipe equals what the pre-rl-zoo3 files gave."""
+    """Every (algo, env, shared, hybrid) recipe equals the frozen one (see the file's ``_about``)."""
     algo, env, ma, variant = _case(key)
     assert _plain(resolve_recipe(algo, env, multi_agent=ma, hybrid=variant)) == _RECIPES[key]
 
