@@ -53,11 +53,27 @@ def _one_line(err: str) -> str:
     return err
 
 
+def _sigint_default() -> None:
+    """Child ``preexec_fn``: SIGINT's default disposition, as a terminal's foreground job has it.
+    A non-interactive shell starts background jobs (``cmd &``, e.g. a CI runner) with SIGINT
+    ignored, and Python then installs no KeyboardInterrupt handler: Ctrl-C is what is tested."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.fixture
+def python_sigint_handler():
+    """Python's own SIGINT handler in this process for the test (restored afterwards), also when
+    pytest inherited SIGINT ignored (see :func:`_sigint_default`)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def _train_child(out, *extra, algo="ppo", hp=PPO_HP, budget=BUDGET):
     return subprocess.Popen(_cli("train", "--env", "tracking", "--algo", algo, "--timesteps", str(budget),
                                  "--checkpoint-freq", str(CKPT), "--out", str(out), "--no-progress",
                                  "--hyperparams", hp, *extra),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_sigint_default)
 
 
 @pytest.fixture(scope="module")
@@ -217,7 +233,7 @@ def test_sac_interrupt_keeps_the_replay_buffer(tmp_path):
     assert res.config["status"] == "complete" and not os.path.exists(os.path.join(out, "replay_buffer.pkl"))
 
 
-def test_second_sigint_aborts_at_once(tmp_path):
+def test_second_sigint_aborts_at_once(tmp_path, python_sigint_handler):
     """Two SIGINTs during training (sent by the process to itself, from a callback, so that the
     second one surely arrives before the stop): no save, config.json stays 'running', the run
     resumes from its last checkpoint, and the default SIGINT handler is back."""
@@ -269,7 +285,7 @@ def test_benchmark_sigint_is_clean_and_terminates_workers(tmp_path):
     # its own process group, signalled as a terminal's Ctrl-C signals the foreground group (workers included)
     proc = subprocess.Popen(_cli("benchmark", "--env", "tracking", "--budget", "tiny", "--out", out, "--workers", "2",
                                  "--no-progress"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_sigint_default)
     models = os.path.join(out, "models", "tracking", "tiny")
 
     def training_started():
