@@ -283,6 +283,22 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def format_markdown(rows: list[dict], overlaps: list[list[str]] | None = None) -> str:
+    """The :func:`format_table` columns as a Markdown table (``results.md``), then the pairs of
+    policies whose cost-ratio CIs overlap (their ranking is not resolved by these seeds)."""
+    lines = [f"| policy | kind | runs | J / J_paper IQM [95% CI] | transient cost (first {TRANSIENT_S:g} s) | "
+             f"steady-state error (RMS, last {STEADY_S:g} s) | failures |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ci = (f"{r['cost_ratio_iqm']:.3g}" if r["runs"] == 1 and r["kind"] == "analytic" else
+              f"{r['cost_ratio_iqm']:.3g} [{r['cost_ratio_ci_low']:.3g}, {r['cost_ratio_ci_high']:.3g}]")
+        lines.append(f"| {r['policy']} | {r['kind']} | {r['runs']} | {ci} | {r['transient_cost_iqm']:.4g} | "
+                     f"{r['steady_state_error_iqm']:.3g} | {r['failure_rate']:.0%} |")
+    if overlaps is not None:
+        lines += ["", "Overlapping 95% CIs of J / J_paper: " +
+                  ("; ".join(f"{a} / {b}" for a, b in overlaps) if overlaps else "none") + "."]
+    return "\n".join(lines) + "\n"
+
+
 # ---------------------------------------------------------------------- figures
 def _plt():
     import matplotlib
@@ -503,6 +519,8 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
         cols = ["policy", "kind", "runs", "episodes"] + [f"{k}_{s}" for k in (
             "cost_ratio", "transient_cost", "steady_state_error", "final_tracking_error") for s in ("iqm", "ci_low", "ci_high")] \
             + ["failure_rate", "return_mean", "return_std", "control_effort_mean", "rms_estimation_error_mean"]
+        with open(os.path.join(edir, "results.md"), "w") as fh:
+            fh.write(format_markdown(rows, doc["ci_overlaps"]))
         with open(os.path.join(edir, "results.csv"), "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
             w.writeheader()

@@ -24,7 +24,7 @@ def tiny_run(tmp_path_factory):
 
 def test_files_and_every_policy(tiny_run):
     out, summ, doc = tiny_run
-    for f in ("summary.json", "summary.png", "tracking/results.csv", "tracking/results.json",
+    for f in ("summary.json", "summary.png", "tracking/results.csv", "tracking/results.json", "tracking/results.md",
               "tracking/error_norms.png", "tracking/learning_curves.png"):
         assert os.path.getsize(os.path.join(out, f)) > 0, f
     expected = {AGENTS[k].label for k in TINY["agents"]} | set(ANALYTIC)
@@ -89,6 +89,19 @@ def test_cli_reuses_finished_runs(tiny_run, capsys):
     assert "paper (separation)" in printed and "PPO (centralised)" in printed and "95% CI" in printed
     doc = json.load(open(os.path.join(out, "tracking", "results.json")))
     assert all(v == 0.0 for secs in doc["train_seconds"].values() for v in secs)
+
+
+def test_markdown_table_has_every_policy_and_the_overlaps(tiny_run):
+    out, _, doc = tiny_run
+    md = open(os.path.join(out, "tracking", "results.md")).read().splitlines()
+    rows = [line for line in md if line.startswith("| ") and not line.startswith("| policy")]
+    assert [r.split(" | ")[0][2:] for r in rows] == [r["policy"] for r in doc["results"]]
+    paper = next(r for r in rows if r.startswith("| paper (separation) |"))
+    assert paper.split(" | ")[3] == "1"  # the unit, deterministic: no interval
+    overlaps = md[-1]
+    assert overlaps.startswith("Overlapping 95% CIs of J / J_paper: ")
+    for a, b in doc["ci_overlaps"]:
+        assert f"{a} / {b}" in overlaps
 
 
 def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
