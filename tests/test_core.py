@@ -9,7 +9,7 @@ from dobs_envs.envs import DisturbanceRejectionEnv, RandomNetworkEnv, TrackingEn
 from dobs_envs.envs.numpy_advance import advance_reference
 from dobs_envs.envs.step_kernel import advance_batch
 from dobs_envs.scenarios.paper import ne2, ne3
-from dobs_envs.sim.kernel import MIN_TILE, SMALL_TILE, TILE
+from dobs_envs.sim.kernel import MIN_TILE, TILE
 
 
 def _episode_arrays(core, seeds, steps, rng_seed=0):
@@ -25,19 +25,20 @@ def _episode_arrays(core, seeds, steps, rng_seed=0):
 
 
 def test_copies_do_not_depend_on_the_batch():
-    """Copy c of a batch (SIMD tiles of 128 and 64 copies, a padded last tile, or the per-copy
-    path) equals a batch-1 core (per-copy path) with the same seed and inputs, bit for bit; two
-    threads give the serial results."""
-    B = TILE + SMALL_TILE + MIN_TILE + 3  # a tile, a small tile, a padded small tile
+    """Copy c of a batch (a SIMD tile of TILE copies, a run-time-width tile of the remainder, or the
+    per-copy path) equals a batch-1 core (per-copy path) with the same seed and inputs, bit for bit;
+    so do the copies of batches whose remainder is the narrowest tile (MIN_TILE) or just too narrow
+    for one (a tile + copy by copy); two threads give the serial results."""
+    B = TILE + 77  # a tile, then a 77-copy run-time-width tile
     seeds = list(range(100, 100 + B))
     big = TrackingEnv.make_core(B, max_cycles=1000)
     big.reset(None, seeds)
-    few = TrackingEnv.make_core(MIN_TILE - 1, max_cycles=1000)  # copy by copy
-    few.reset(None, seeds[:MIN_TILE - 1])
+    others = {n: TrackingEnv.make_core(n, max_cycles=1000) for n in (MIN_TILE - 1, MIN_TILE, TILE + MIN_TILE - 1)}
+    for n, core in others.items():
+        core.reset(None, seeds[:n])
     rng = np.random.default_rng(0)
     U = [rng.uniform(-20, 20, size=(B, 5)) for _ in range(6)]
-    small = {c: TrackingEnv.make_core(1, max_cycles=1000) for c in (0, 5, TILE - 1, TILE, TILE + SMALL_TILE - 1,
-                                                                    TILE + SMALL_TILE, B - 1)}
+    small = {c: TrackingEnv.make_core(1, max_cycles=1000) for c in (0, 5, TILE - 1, TILE, TILE + 40, B - 1)}
     for c, core in small.items():
         core.reset(None, [seeds[c]])
     par = TrackingEnv.make_core(B, threads=2, max_cycles=1000)
@@ -46,12 +47,14 @@ def test_copies_do_not_depend_on_the_batch():
     for u in U:
         big.advance(u)
         par.advance(u)
-        few.advance(u[:MIN_TILE - 1])
+        for n, core in others.items():
+            core.advance(u[:n])
+            np.testing.assert_array_equal(core.observations, big.observations[:n])
+            np.testing.assert_array_equal(core.sim_state.z, big.sim_state.z[:n])
         for c, core in small.items():
             core.advance(u[c:c + 1])
             np.testing.assert_array_equal(core.observations[0], big.observations[c])
             np.testing.assert_array_equal(core.sim_state.z[0], big.sim_state.z[c])
-        np.testing.assert_array_equal(few.observations[5], big.observations[5])
     np.testing.assert_array_equal(par.observations, big.observations)
     np.testing.assert_array_equal(par.sim_state.gamma, big.sim_state.gamma)
 

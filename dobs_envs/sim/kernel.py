@@ -19,13 +19,15 @@ Two layouts of the same arithmetic
   each matrix (no data-dependent inner loops).
 - :func:`period_tile` advances a *tile* of ``W`` copies stored with the copy axis
   **innermost** (``X (n, W)``, ``Z (N, n, W)``, ...): every statement is a loop over
-  the ``W`` copies, which the compiler turns into SIMD instructions across copies
-  (``W`` is a compile-time constant: :data:`TILE` or :data:`SMALL_TILE`).
+  the ``W`` copies, which the compiler turns into SIMD instructions across copies.
+  One body (:func:`_tile_body`), compiled twice: :func:`period_tile` with ``W`` a
+  compile-time constant (:data:`TILE`: constant trip counts) and :func:`period_tile_any`
+  with ``W`` known at run time (any remainder of fewer than :data:`TILE` copies, unpadded;
+  LLVM unrolls narrow *constant* widths completely, which takes minutes to compile).
 
 :func:`advance_rows` cuts a range of copies into tiles of :data:`TILE` copies
-(gathered from / scattered back to the batch-first arrays), then tiles of
-:data:`SMALL_TILE` (the last one padded) while at least :data:`MIN_TILE` copies remain,
-and runs the rest copy by copy. Every copy's arithmetic is identical in both layouts --
+(gathered from / scattered back to the batch-first arrays), then runs a remainder of at
+least :data:`MIN_TILE` copies as one run-time-width tile, and a smaller one copy by copy. Every copy's arithmetic is identical in both layouts --
 each sum is accumulated in the same order, term by term, and :data:`FASTMATH` allows only
 FMA contraction -- so a copy's trajectory does not depend on the batch size or on its
 position in the batch (tested bit for bit).
@@ -45,13 +47,14 @@ import numpy as np
 #: arithmetic says: an overflowing observer yields a non-finite state the environment
 #: detects and terminates on, instead of undefined behaviour).
 FASTMATH = {"contract"}
-#: Copies per SIMD tile of :func:`advance_rows` (NE2, one core: 5.4 us per copy and control step
-#: at 128, 6.1 at 64; 256 was slower than 128 in the dense kernel).
+#: Copies per SIMD tile of :func:`advance_rows`, a compile-time constant (NE2, one core: 5.0 us per
+#: copy and control step at 128, 5.4 at 64; the same code with a run-time width: 5.8 at 128).
 TILE = 128
-#: Copies per tile of a remainder of fewer than TILE copies.
-SMALL_TILE = 64
-#: Fewest remaining copies run as a (padded) small tile, fewer run one by one (the cost crossover on NE2).
-MIN_TILE = 14
+#: Fewest remaining copies (fewer than TILE) run as one tile of exactly that many copies (run-time
+#: width, no padding); fewer run one by one. The cost crossover on NE2 (one core, us per control
+#: period): 4 copies 166 copy by copy / 183 as a tile, 8 copies 240 / 115, 16 copies 480 / 161
+#: (the padded 64-copy tile used before: 369).
+MIN_TILE = 6
 
 try:  # numba is a hard dependency, but keep the package importable without it
     import numba
@@ -68,7 +71,7 @@ except ImportError:  # pragma: no cover
     _njit_inline = _njit
 
 
-__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "SMALL_TILE", "MIN_TILE", "period_copy", "period_tile", "advance_rows",
+__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "period_copy", "period_tile", "period_tile_any", "advance_rows",
            "unpack_kernel_args",
            "control_period_compiled", "flops_per_period"]
 
@@ -209,16 +212,35 @@ def _scratch_tile(ka, W):
 
 @_njit
 def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
+    """One control period of a tile of ``W`` copies, copy axis last, in place (:func:`_tile_body`).
+
+    ``W`` must be a compile-time constant (:data:`TILE`): call it from compiled code with a
+    constant (from Python, every call would recompile); widths of 32 or more (LLVM unrolls
+    narrower constant tiles completely: minutes of compilation). Other widths:
+    :func:`period_tile_any`.
+    """
+    numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
+    _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W)
+
+
+@_njit
+def period_tile_any(X, Z, G, GS, V, XR, U, R, ka, work, W):
+    """:func:`period_tile` with the width ``W`` known at run time only (one compilation for every
+    width; the loops over the copies are vectorised with run-time trip counts). The same
+    arithmetic per copy: results are bitwise those of :func:`period_tile` and :func:`period_copy`."""
+    _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W)
+
+
+@_njit_inline
+def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
     """One control period of a tile of ``W`` copies, copy axis last, in place.
 
     ``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``, ``XR (n, W)``,
-    ``U``/``R (m, W)``; ``W`` must be a compile-time constant (:data:`TILE`, :data:`SMALL_TILE`):
-    call it from compiled code with a constant (from Python, every call would recompile), and
-    prefer widths of 32 or more (LLVM unrolls narrower tiles completely: minutes of compilation).
-    Per copy the same operations in the same order as :func:`period_copy`; the innermost
-    loops run over the copies (SIMD), each pass over the copies adding up to four terms.
+    ``U``/``R (m, W)`` (arrays at least ``W`` wide). Per copy the same operations in the same
+    order as :func:`period_copy`; the innermost loops run over the copies (SIMD), each pass
+    over the copies adding up to four terms. Inlined into :func:`period_tile` (``W`` constant)
+    and :func:`period_tile_any` (``W`` at run time).
     """
-    numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
     (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
      phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
     BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows
@@ -374,9 +396,9 @@ def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r):
 
 @_njit
 def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
-    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies, then
-    tiles of :data:`SMALL_TILE` (the last one padded with copies of its last copy, not written
-    back) while at least :data:`MIN_TILE` copies remain, the rest copy by copy."""
+    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies, then a
+    remainder of at least :data:`MIN_TILE` copies as one tile of exactly that width
+    (:func:`period_tile_any`), a smaller remainder copy by copy."""
     b = lo
     if hi - b >= TILE:
         st, wk = _scratch_tile(ka, TILE)
@@ -386,13 +408,12 @@ def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
             _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r)
             b += TILE
     if hi - b >= MIN_TILE:
-        st, wk = _scratch_tile(ka, SMALL_TILE)
-        while hi - b >= MIN_TILE:
-            nl = min(SMALL_TILE, hi - b)
-            _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
-            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, SMALL_TILE)
-            _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r)
-            b += nl
+        nl = hi - b
+        st, wk = _scratch_tile(ka, nl)
+        _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
+        period_tile_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl)
+        _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r)
+        b = hi
     if hi > b:
         sc = _scratch_copy(ka)
         for c in range(b, hi):
