@@ -135,11 +135,27 @@ def _run_signature(spec: dict) -> dict:
                                  "curve_every")}
 
 
+def _mean_trajectory(series) -> np.ndarray:
+    """Mean over episodes of per-step series; a shorter one (an episode that ended early) is padded
+    with its last value."""
+    arrs = [np.asarray(x, dtype=np.float64) for x in series]
+    L = max(len(a) for a in arrs)
+    return np.mean([np.concatenate([a, np.full(L - len(a), a[-1])]) if len(a) < L else a for a in arrs], axis=0)
+
+
 def _episode_payload(res) -> dict:
+    """What a run keeps of its evaluation: every episode's metrics and, for the error-norm figure, the
+    task and estimation errors averaged over the episodes (``result.json`` of a full-budget run: ~25 kB
+    instead of ~500 kB with every episode's trajectories)."""
     return {"episodes": [r.as_dict() for r in res],
             "t": max(res, key=lambda r: len(r.t)).t.tolist() if res else [],
-            "tracking_error": [r.tracking_error.tolist() for r in res],
-            "estimation_error": [r.estimation_error.tolist() for r in res]}
+            "tracking_error_mean": _mean_trajectory([r.tracking_error for r in res]).tolist() if res else [],
+            "estimation_error_mean": _mean_trajectory([r.estimation_error for r in res]).tolist() if res else []}
+
+
+def _run_means(run: dict, key: str) -> np.ndarray:
+    """A run's mean trajectory of ``key`` (results stored before 2026-12-02 hold every episode's)."""
+    return np.asarray(run[f"{key}_mean"]) if f"{key}_mean" in run else _mean_trajectory(run[key])
 
 
 def _finished_run(path: str, sig: dict, hyperparams: dict) -> dict | None:
@@ -313,15 +329,11 @@ def _plot_error_norms(payloads: dict, path: str, title: str, task_label: str) ->
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
     for name, runs in payloads.items():
-        te = [np.asarray(x) for r in runs for x in r["tracking_error"]]
-        ee = [np.asarray(x) for r in runs for x in r["estimation_error"]]
-        L = max(len(x) for x in te)
+        # the mean over every (run, episode): runs of one benchmark have the same episodes, so the mean
+        # of the runs' means (padded as the episodes are) is that mean
         t = max((np.asarray(r["t"]) for r in runs), key=len)
-
-        def pad(a):
-            return np.concatenate([a, np.full(L - len(a), a[-1])]) if len(a) < L else a
-        axes[0].plot(t, np.mean([pad(x) for x in te], axis=0), lw=1.2, label=name)
-        axes[1].plot(t, np.mean([pad(x) for x in ee], axis=0), lw=1.2, label=name)
+        axes[0].plot(t, _mean_trajectory([_run_means(r, "tracking_error") for r in runs]), lw=1.2, label=name)
+        axes[1].plot(t, _mean_trajectory([_run_means(r, "estimation_error") for r in runs]), lw=1.2, label=name)
     axes[0].set_ylabel(f"mean {task_label} over episodes")
     axes[1].set_ylabel(r"mean RMS$_i$ $\|\hat x_i - x\|$ (env observers)")
     for ax in axes:

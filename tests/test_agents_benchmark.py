@@ -127,6 +127,28 @@ def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
     assert _finished_run(copy, sig, today) is None
 
 
+def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_run):
+    """A run stores its evaluation's errors averaged over the episodes (not every episode's); the
+    error-norm figure's mean of the runs' means is the mean over every (run, episode), episodes
+    that ended early padded with their last value -- also for runs stored with every episode."""
+    from agents.benchmark import _mean_trajectory, _run_means
+
+    out, _, _ = tiny_run
+    res = json.load(open(os.path.join(out, "models", "tracking", "tiny", "ppo", "s0", "result.json")))
+    assert "tracking_error" not in res and "estimation_error" not in res
+    assert len(res["tracking_error_mean"]) == len(res["estimation_error_mean"]) == len(res["t"])
+    rng = np.random.default_rng(0)
+    lengths = [[20, 20, 7], [13, 4, 20], [5, 5, 5]]  # three runs of three episodes; the last run ended early
+    runs = [[rng.uniform(size=L) for L in ls] for ls in lengths]
+    episodes = [e for r in runs for e in r]
+    want = np.mean([np.concatenate([e, np.full(20 - len(e), e[-1])]) for e in episodes], axis=0)
+    compact = [{"tracking_error_mean": _mean_trajectory(r).tolist()} for r in runs]
+    old = [{"tracking_error": [e.tolist() for e in r]} for r in runs]
+    for stored in (compact, old):
+        got = _mean_trajectory([_run_means(r, "tracking_error") for r in stored])
+        np.testing.assert_allclose(got, want, rtol=1e-14)
+
+
 @pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"]])
 def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
