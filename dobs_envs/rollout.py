@@ -25,9 +25,12 @@ import numba
 import numpy as np
 
 from .control import paper_policy
+from .numba_cache import ensure_fresh
 from .control.kernel import law_arrays, law_copy
 from .sim import estimates, step_env
 from .sim.kernel import advance_rows, unpack_kernel_args
+
+ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
 __all__ = ["Trajectory", "rollout", "rollout_reference", "window_stats"]
 

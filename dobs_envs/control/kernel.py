@@ -17,6 +17,10 @@ import math
 import numba
 import numpy as np
 
+from ..numba_cache import ensure_fresh
+
+ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
+
 __all__ = ["LAW_CODES", "law_copy", "law_arrays"]
 
 #: controller kind -> integer code of :func:`law_copy`

@@ -20,6 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numba_cache import ensure_fresh
+
+ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
+
 try:
     import numba as _numba
 

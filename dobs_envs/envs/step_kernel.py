@@ -24,8 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numba_cache import ensure_fresh
 from ..sim.kernel import advance_rows, unpack_kernel_args
 from .features import features_row, unpack_static
+
+ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
 try:
     import numba as _numba

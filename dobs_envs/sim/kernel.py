@@ -40,6 +40,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numba_cache import ensure_fresh
+
+ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
+
 #: LLVM fast-math flags of the kernel: FMA contraction (``contract``) only. Not ``reassoc``
 #: (a copy's sums must not be reordered differently in the scalar and the tiled layout),
 #: not ``nsz`` (``0.0 + a*b`` must stay an FMA with 0, never a bare product that a following
