@@ -131,9 +131,12 @@ REPRODUCERS = {
 
 @pytest.mark.parametrize("message", sorted(REPRODUCERS))
 def test_fuzz_reproducers_now_succeed(message):
+    """Each input made the pre-issue-12 implementation (tests/_lemma2_reference.py) raise a
+    RuntimeError with that message under the numpy/scipy of 2026-12-01; whether it still does
+    depends on the installed LAPACK's rounding at these extreme scales (with numpy 2.4.6 /
+    scipy 1.17.1 the last one returns a design), so only today's implementation is checked:
+    a valid design satisfying the Lemma 2 equations."""
     A, B, C = REPRODUCERS[message]
-    with pytest.raises(RuntimeError, match=message.split()[-1]):
-        reference_strong_detectability(A, B, C)
     res = strong_detectability(A, B, C)
     assert_valid_design(A, B, C, res)
     assert max(lemma2_residuals(A, B, C, res)) <= 1e-15
