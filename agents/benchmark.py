@@ -145,7 +145,7 @@ def _mean_trajectory(series) -> np.ndarray:
 
 def _episode_payload(res) -> dict:
     """What a run keeps of its evaluation: every episode's metrics and, for the error-norm figure, the
-    task and estimation errors averaged over the episodes (``result.json`` of a full-budget run: ~25 kB
+    task and estimation errors averaged over the episodes (``result.json`` of a full-budget run: ~45 kB
     instead of ~500 kB with every episode's trajectories)."""
     return {"episodes": [r.as_dict() for r in res],
             "t": max(res, key=lambda r: len(r.t)).t.tolist() if res else [],

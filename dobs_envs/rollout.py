@@ -25,8 +25,8 @@ import numba
 import numpy as np
 
 from .control import paper_policy
-from .numba_cache import ensure_fresh
 from .control.kernel import law_arrays, law_copy
+from .numba_cache import ensure_fresh
 from .sim import estimates, step_env
 from .sim.kernel import advance_rows, unpack_kernel_args
 
