@@ -36,6 +36,7 @@ import csv
 import json
 import multiprocessing
 import os
+import shutil
 import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -47,7 +48,8 @@ from .config import ENVS, gym_factory, parallel_factory
 from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy
 from .stats import interval_estimate
 
-__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "format_table", "AgentSpec"]
+__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "replaced_runs", "BenchmarkPlan",
+           "RunConflictError", "format_table", "AgentSpec"]
 
 
 @dataclass(frozen=True)
@@ -175,23 +177,39 @@ def _finished_run(path: str, sig: dict, hyperparams: dict) -> dict | None:
     return prev
 
 
-def _train_and_evaluate(spec: dict) -> dict:
-    """Train one (agent, seed) (or reuse a finished identical run) and evaluate it. Runs in a worker."""
-    from .curves import make_curve_callback
-    from .train import load_agent, resolve_recipe, set_threads, train
-
-    set_threads(spec["threads"])
-    path = spec["path"]
-    done_path = os.path.join(path, "result.json")
-    sig = _run_signature(spec)
+def _training_overrides(spec: dict) -> dict:
+    """The budget's hyperparameter overrides of a run plus its agent's training-only env options."""
     a = AGENTS[spec["agent"]]
     hp = dict(spec["hp"])
     if a.train_env_kwargs:
         hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
-    prev = _finished_run(path, sig, resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
-                                                   overrides=hp or None).hyperparams)
+    return hp
+
+
+def _stored_result(spec: dict) -> dict | None:
+    """The finished result of ``spec``'s run if it can be reused with today's recipe, else None."""
+    from .train import resolve_recipe
+
+    a = AGENTS[spec["agent"]]
+    recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
+                            overrides=_training_overrides(spec) or None)
+    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams)
+
+
+def _train_and_evaluate(spec: dict) -> dict:
+    """Train one (agent, seed) (or reuse a finished identical run) and evaluate it. Runs in a worker."""
+    from .curves import make_curve_callback
+    from .train import load_agent, set_threads, train
+
+    set_threads(spec["threads"])
+    prev = _stored_result(spec)
     if prev is not None:
         return prev
+    path = spec["path"]
+    done_path = os.path.join(path, "result.json")
+    sig = _run_signature(spec)
+    a = AGENTS[spec["agent"]]
+    hp = _training_overrides(spec)
     env, env_kwargs = spec["env"], spec["env_kwargs"]
     steps = spec["steps"]
     os.makedirs(path, exist_ok=True)
@@ -429,23 +447,35 @@ def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: i
     return plan, n_seeds
 
 
-def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
-                  eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
-                  agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
-                  progress: bool = True, threads: int | None = 1) -> dict:
-    """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
+@dataclass(frozen=True)
+class BenchmarkPlan:
+    """What a benchmark invocation trains and evaluates (:func:`plan_runs`).
 
-    Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's);
-    ``workers`` processes train in parallel (default: the number of CPU cores, at most 2 x
-    ... the jobs).
+    ``specs`` holds one training run per (env, agent, training seed), longest first; a run's
+    ``path`` is ``<out>/models/<env>/<budget>/<agent>/s<seed>``.
     """
+
+    envs: list
+    budget: str
+    steps: dict
+    training_seeds: list
+    eval_seeds: list
+    curve_seeds: list
+    env_kwargs: dict
+    specs: list
+
+
+def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
+              eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
+              agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1) -> BenchmarkPlan:
+    """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
+    written). With :func:`pending_runs` it tells which of them a stored result already answers."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
     env_names = list(ENVS) if env == "all" else [env]
     for e in env_names:
         if e not in ENVS:
             raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
-    t_start = time.perf_counter()
     B = BUDGETS[budget]
     plan, n_seeds = _plan(budget, agents, timesteps, seeds)
     episodes = int(episodes or B["episodes"])
@@ -454,8 +484,6 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     eval_seeds = [eval_seed + k for k in range(episodes)]
     curve_seeds = [CURVE_SEED + k for k in range(B["curve_episodes"])]
     env_kwargs = dict(B["env_kwargs"])
-    os.makedirs(out, exist_ok=True)
-
     specs = []
     for e in env_names:
         for key, steps in plan.items():
@@ -468,6 +496,62 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                               "path": os.path.join(out, "models", e, budget, key, f"s{s}")})
     # longest jobs first: better packing on the workers
     specs.sort(key=lambda sp: -sp["steps"] * (5 if AGENTS[sp["agent"]].multi_agent else 1))
+    return BenchmarkPlan(env_names, budget, plan, list(range(seed, seed + n_seeds)), eval_seeds, curve_seeds,
+                         env_kwargs, specs)
+
+
+class RunConflictError(ValueError):
+    """Training would replace finished runs of another configuration (``paths``; pass ``overwrite=True``)."""
+
+    def __init__(self, out: str, paths: list[str]):
+        self.out, self.paths = out, list(paths)
+        super().__init__(f"{len(self.paths)} finished run(s) in {os.path.join(out, 'models')} were made with another "
+                         f"configuration or recipe (first: {self.paths[0]}); training would replace them: pass "
+                         f"overwrite=True or choose another out")
+
+
+def replaced_runs(pending: list[dict]) -> list[dict]:
+    """The specs among ``pending`` whose directory holds a finished result of another configuration
+    or recipe: training them replaces that run."""
+    return [sp for sp in pending if os.path.exists(os.path.join(sp["path"], "result.json"))]
+
+
+def pending_runs(plan: BenchmarkPlan) -> list[dict]:
+    """The specs of ``plan`` that would train: those without a finished result of the same signature
+    and recipe (:func:`_finished_run`). ``[]`` means the benchmark only evaluates the analytic
+    controllers and aggregates the stored results."""
+    return [sp for sp in plan.specs if _stored_result(sp) is None]
+
+
+def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
+                  eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
+                  agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
+                  progress: bool = True, threads: int | None = 1, overwrite: bool = False) -> dict:
+    """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
+
+    Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's);
+    ``workers`` processes train in parallel (default: the number of CPU cores, at most 8).
+    :func:`plan_runs` and :func:`pending_runs` tell beforehand what it would train.
+
+    Raises
+    ------
+    RunConflictError
+        if a run to train would replace a finished run of another configuration (other training
+        steps, evaluation seeds or recipe) in its directory, unless ``overwrite`` (which removes
+        those runs first).
+    """
+    t_start = time.perf_counter()
+    P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
+                  agents=agents, seeds=seeds, threads=threads)
+    clash = replaced_runs(pending_runs(P))
+    if clash and not overwrite:
+        raise RunConflictError(out, [sp["path"] for sp in clash])
+    for sp in clash:
+        shutil.rmtree(sp["path"])
+    env_names, plan, specs, env_kwargs = P.envs, P.steps, P.specs, P.env_kwargs
+    episodes, eval_seeds, curve_seeds = len(P.eval_seeds), P.eval_seeds, P.curve_seeds
+    n_seeds = len(P.training_seeds)
+    os.makedirs(out, exist_ok=True)
     n_workers = int(workers or min(os.cpu_count() or 1, 8))
     results: dict[tuple, dict] = {}
     t_train = time.perf_counter()

@@ -70,6 +70,11 @@ def add_parser(sub) -> None:
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="retrain runs whose directory holds a finished run of another configuration or recipe "
+                        "(removes those runs); without it the benchmark refuses to replace them")
+    p.add_argument("--dry-run", action="store_true",
+                   help="list the runs that would train and those whose stored results are reused; train nothing")
     p.set_defaults(func=_benchmark)
 
 
@@ -246,14 +251,24 @@ def _evaluate(args) -> int:
 
 
 def _benchmark(args) -> int:
-    from .benchmark import run_benchmark
+    from .benchmark import RunConflictError, plan_runs, run_benchmark
 
     t0 = time.perf_counter()
     agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
+    try:  # the arguments argparse cannot check (the agent names), as a usage error
+        plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
+                         episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds)
+    except ValueError as exc:
+        _usage_error(str(exc))
+    if args.dry_run:
+        return _benchmark_dry_run(args, plan)
     try:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
-                             workers=args.workers, progress=not args.no_progress)
+                             workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite)
+    except RunConflictError as exc:
+        _usage_error(f"--out {args.out!r}: {len(exc.paths)} finished run(s) were made with another configuration "
+                     f"or recipe (first: {exc.paths[0]}); pass --overwrite to retrain them or choose another --out")
     except KeyboardInterrupt:
         print(f"dobs-envs: benchmark interrupted; finished runs are kept in {args.out}/models (result.json) and "
               f"reused when the same command runs again", file=sys.stderr)
@@ -265,4 +280,18 @@ def _benchmark(args) -> int:
         print(table)
     print(f"\nwrote {args.out}/summary.json, summary.png and <env>/results.{{csv,json}}, error_norms.png, "
           f"learning_curves.png; wall time {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _benchmark_dry_run(args, plan) -> int:
+    """``benchmark --dry-run``: which runs would train, which stored results are reused (nothing written)."""
+    from .benchmark import pending_runs, replaced_runs
+
+    todo = pending_runs(plan)
+    clash = {sp["path"] for sp in replaced_runs(todo)}
+    print(f"{len(todo)} of {len(plan.specs)} runs would train; {len(plan.specs) - len(todo)} stored results "
+          f"in {args.out}/models are reused (same configuration and recipe)")
+    for sp in sorted(todo, key=lambda sp: (sp["env"], sp["agent"], sp["seed"])):
+        note = " (replaces a finished run of another configuration: needs --overwrite)" if sp["path"] in clash else ""
+        print(f"  train {sp['env']} {sp['agent']} seed {sp['seed']}: {sp['steps']} steps -> {sp['path']}{note}")
     return 0

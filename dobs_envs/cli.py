@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 #: module -> the sub-commands it registers (used for a helpful stub when its import fails)
@@ -50,9 +51,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         result = args.func(args)
+        sys.stdout.flush()  # a closed pipe is found here, inside the handler, not at interpreter exit
     except KeyboardInterrupt:  # Ctrl-C: one line and 128 + SIGINT, no traceback (train/benchmark say more)
         print("dobs-envs: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # stdout closed early (`dobs-envs ... | head`): no traceback; Python's documented recipe
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more is flushed to the pipe
+        return 1
     return int(result or 0)
 
 

@@ -149,11 +149,36 @@ def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_
         np.testing.assert_allclose(got, want, rtol=1e-14)
 
 
-@pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"]])
+@pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"],
+                                  ["--agents", "ppo,dqn"], ["--agents", "ppo,dqn", "--dry-run"]])
 def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
+    out = tmp_path / "out"
     with pytest.raises(SystemExit) as exc:
-        main(["benchmark", "--budget", "tiny", "--out", str(tmp_path), *argv])
+        main(["benchmark", "--budget", "tiny", "--out", str(out), *argv])
     assert exc.value.code == 2
+    assert not out.exists()
+    if argv[0] == "--agents":  # not an argparse choice: our one-line usage error, naming the agent
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "unknown agents ['dqn']" in err
+
+
+def test_cli_dry_run_lists_the_runs_that_would_train(tiny_run, tmp_path, capsys):
+    """``--dry-run`` tells which runs train and which stored results are reused; it writes nothing."""
+    out, _, _ = tiny_run
+    n = len(TINY["agents"]) * TINY["seeds"]
+    assert main(["benchmark", "--budget", "tiny", "--out", out, "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"0 of {n} runs would train; {n} stored results in {out}/models are reused (same configuration and recipe)"]
+    # another training budget is another run: nothing reusable
+    assert main(["benchmark", "--budget", "tiny", "--out", out, "--dry-run", "--agents", "ppo", "--timesteps", "100"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"{TINY['seeds']} of {TINY['seeds']} runs would train")
+    assert lines[1] == (f"  train tracking ppo seed 0: 100 steps -> {out}/models/tracking/tiny/ppo/s0 "
+                        f"(replaces a finished run of another configuration: needs --overwrite)")
+    empty = tmp_path / "empty"
+    assert main(["benchmark", "--env", "all", "--budget", "tiny", "--out", str(empty), "--dry-run"]) == 0
+    assert capsys.readouterr().out.startswith(f"{4 * n} of {4 * n} runs would train; 0 stored")
+    assert not empty.exists()
 
 
 def test_cli_train_and_evaluate_residual(tmp_path, capsys):
@@ -189,3 +214,34 @@ def test_bad_arguments_are_named(tmp_path):
         run_benchmark("tracking", "huge", str(tmp_path))
     with pytest.raises(ValueError, match="unknown agents"):
         run_benchmark("tracking", "tiny", str(tmp_path), agents=["ppo", "dqn"])
+
+
+def test_a_finished_run_of_another_configuration_is_replaced_only_with_overwrite(tiny_run, tmp_path, capsys):
+    """Another training budget (or recipe, or evaluation seeds) for the same (env, agent, seed) trains
+    into the same directory: the benchmark refuses to replace the finished run there unless told to."""
+    import shutil
+
+    from agents.benchmark import RunConflictError
+
+    out, _, _ = tiny_run
+    stored = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0", "result.json")
+    before = open(stored).read()
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--budget", "tiny", "--out", out, "--agents", "ppo", "--timesteps", "100",
+              "--no-progress"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "2 finished run(s)" in err and "--overwrite" in err
+    assert open(stored).read() == before
+
+    # overwrite=True retrains (on a copy of one run: the module's fixture stays as it is)
+    mine = tmp_path / "bench"
+    run = mine / "models" / "tracking" / "tiny" / "ppo_res" / "s0"
+    shutil.copytree(os.path.join(out, "models", "tracking", "tiny", "ppo_res", "s0"), run)
+    kw = dict(agents=["ppo_res"], seeds=1, timesteps=64, workers=1, progress=False)
+    with pytest.raises(RunConflictError) as conflict:
+        run_benchmark("tracking", "tiny", str(mine), **kw)
+    assert conflict.value.paths == [str(run)]
+    run_benchmark("tracking", "tiny", str(mine), overwrite=True, **kw)
+    res = json.load(open(run / "result.json"))
+    assert res["signature"]["steps"] == 64 and res["cached"] is False

@@ -106,3 +106,16 @@ def test_train_refuses_to_overwrite(run_dir, tmp_path, capsys):
     before = open(os.path.join(run_dir, "config.json")).read()
     assert "--overwrite" in _exit2(["train", "--out", run_dir, "--no-progress", "--timesteps", "64"], capsys)
     assert open(os.path.join(run_dir, "config.json")).read() == before
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    """``dobs-envs benchmark --dry-run | head -1``: the reader leaves early; no traceback on stderr."""
+    import subprocess
+
+    proc = subprocess.Popen([sys.executable, "-m", "dobs_envs.cli", "benchmark", "--env", "all", "--budget", "tiny",
+                             "--out", str(tmp_path / "out"), "--dry-run"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # before the child writes: its first flush meets a closed pipe
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 1
+    assert err == ""
