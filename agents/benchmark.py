@@ -48,8 +48,8 @@ from .config import ENVS, gym_factory, parallel_factory
 from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy
 from .stats import interval_estimate
 
-__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "replaced_runs", "BenchmarkPlan",
-           "RunConflictError", "format_table", "AgentSpec"]
+__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "reevaluated_runs", "replaced_runs",
+           "BenchmarkPlan", "RunConflictError", "format_table", "AgentSpec"]
 
 
 @dataclass(frozen=True)
@@ -160,10 +160,17 @@ def _run_means(run: dict, key: str) -> np.ndarray:
     return np.asarray(run[f"{key}_mean"]) if f"{key}_mean" in run else _mean_trajectory(run[key])
 
 
-def _finished_run(path: str, sig: dict, hyperparams: dict) -> dict | None:
+TRAINING_KEYS = ("env", "agent", "seed", "steps", "hp", "env_kwargs", "curve_seeds", "curve_every")
+"""The part of a run's signature that defines its training (the rest, ``eval_seeds``, its evaluation)."""
+
+
+def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: bool = False) -> dict | None:
     """The stored result of the run in ``path`` if it finished with this signature *and* was trained
     with these merged hyperparameters (its ``config.json``): editing a recipe file retrains the
-    affected runs instead of reusing results of the old recipe. None otherwise."""
+    affected runs instead of reusing results of the old recipe. None otherwise.
+
+    ``training_only``: compare only the signature's :data:`TRAINING_KEYS` (the run was trained as
+    ``sig`` asks, perhaps evaluated on other episodes)."""
     try:
         with open(os.path.join(path, "result.json")) as fh:
             prev = json.load(fh)
@@ -171,7 +178,11 @@ def _finished_run(path: str, sig: dict, hyperparams: dict) -> dict | None:
             trained_with = json.load(fh).get("hyperparams")
     except (OSError, ValueError):
         return None
-    if prev.get("signature") != sig or trained_with != json.loads(json.dumps(hyperparams)):
+    old = prev.get("signature")
+    if not isinstance(old, dict) or trained_with != json.loads(json.dumps(hyperparams)):
+        return None
+    keys = TRAINING_KEYS if training_only else tuple(sig)
+    if set(old) != set(sig) or any(old[k] != sig[k] for k in keys):
         return None
     prev["cached"] = True
     return prev
@@ -186,51 +197,85 @@ def _training_overrides(spec: dict) -> dict:
     return hp
 
 
-def _stored_result(spec: dict) -> dict | None:
-    """The finished result of ``spec``'s run if it can be reused with today's recipe, else None."""
+def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
+    """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
+    (``training_only``: see :func:`_finished_run`)."""
     from .train import resolve_recipe
 
     a = AGENTS[spec["agent"]]
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
                             overrides=_training_overrides(spec) or None)
-    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams)
+    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only)
+
+
+def _stored_model(spec: dict) -> dict | None:
+    """The stored result of a run trained exactly as ``spec`` asks but evaluated on other episodes,
+    if its model is kept (``model.zip``, and ``vecnormalize.pkl`` when it normalises): the benchmark
+    evaluates that model again instead of training it again. None otherwise."""
+    import zipfile
+
+    prev = _stored_result(spec, training_only=True)
+    if prev is None or prev["signature"] == _run_signature(spec):
+        return None
+    path = spec["path"]
+    try:
+        with open(os.path.join(path, "config.json")) as fh:
+            normalize = bool(json.load(fh).get("normalize"))
+    except (OSError, ValueError):
+        return None
+    model = os.path.join(path, "model.zip")
+    if not (os.path.isfile(model) and zipfile.is_zipfile(model)):
+        return None
+    if normalize and not os.path.isfile(os.path.join(path, "vecnormalize.pkl")):
+        return None
+    return prev
+
+
+def _evaluate_and_record(spec: dict, train_s: float, curve: list) -> dict:
+    """Evaluate the model in ``spec['path']`` on the spec's episodes and write ``result.json`` (atomically)."""
+    from .train import load_agent
+
+    a = AGENTS[spec["agent"]]
+    agent = load_agent(spec["path"])
+    eval_env = (parallel_factory if a.multi_agent else gym_factory)(spec["env"], spec["env_kwargs"])()
+    res = evaluate_policy(eval_env, agent.policy_for(eval_env), len(spec["eval_seeds"]), spec["eval_seeds"][0],
+                          parallel=a.multi_agent)
+    eval_env.close()
+    out = {"signature": _run_signature(spec), "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
+           "curve": curve, **_episode_payload(res), "cached": False}
+    done_path = os.path.join(spec["path"], "result.json")
+    with open(done_path + ".tmp", "w") as fh:
+        json.dump(out, fh)
+    os.replace(done_path + ".tmp", done_path)  # atomic: a half-written result is never taken as finished
+    return out
 
 
 def _train_and_evaluate(spec: dict) -> dict:
-    """Train one (agent, seed) (or reuse a finished identical run) and evaluate it. Runs in a worker."""
+    """Train one (agent, seed) and evaluate it; reuse a finished identical run, or evaluate a kept
+    model again when only the evaluation episodes changed. Runs in a worker."""
     from .curves import make_curve_callback
-    from .train import load_agent, set_threads, train
+    from .train import set_threads, train
 
     set_threads(spec["threads"])
     prev = _stored_result(spec)
     if prev is not None:
         return prev
+    prev = _stored_model(spec)
+    if prev is not None:  # trained as asked: evaluate it on the new episodes (its training time counts as 0)
+        out = _evaluate_and_record(spec, prev["train_seconds"], prev["curve"])
+        return {**out, "reevaluated": True}
     path = spec["path"]
-    done_path = os.path.join(path, "result.json")
-    sig = _run_signature(spec)
     a = AGENTS[spec["agent"]]
-    hp = _training_overrides(spec)
     env, env_kwargs = spec["env"], spec["env_kwargs"]
-    steps = spec["steps"]
     os.makedirs(path, exist_ok=True)
     n_agents = len(parallel_factory(env, env_kwargs)().possible_agents) if a.multi_agent else 1
     curve = make_curve_callback(env, env_kwargs, spec["curve_seeds"], spec["curve_every"], n_agents=n_agents,
                                 path=os.path.join(path, "curve.json"))
     t0 = time.perf_counter()
-    train(env, a.algo, multi_agent=a.multi_agent, timesteps=steps, seed=spec["seed"], out=path, progress=False,
-          hyperparams=hp or None, env_kwargs=env_kwargs, hybrid=a.hybrid, callbacks=[curve], checkpoint_freq=0)
-    train_s = time.perf_counter() - t0
-    agent = load_agent(path)
-    eval_env = (parallel_factory if a.multi_agent else gym_factory)(env, env_kwargs)()
-    res = evaluate_policy(eval_env, agent.policy_for(eval_env), len(spec["eval_seeds"]), spec["eval_seeds"][0],
-                          parallel=a.multi_agent)
-    eval_env.close()
-    out = {"signature": sig, "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
-           "curve": curve.points, **_episode_payload(res), "cached": False}
-    with open(done_path + ".tmp", "w") as fh:
-        json.dump(out, fh)
-    os.replace(done_path + ".tmp", done_path)  # atomic: a half-written result is never taken as finished
-    return out
+    train(env, a.algo, multi_agent=a.multi_agent, timesteps=spec["steps"], seed=spec["seed"], out=path,
+          progress=False, hyperparams=_training_overrides(spec) or None, env_kwargs=env_kwargs, hybrid=a.hybrid,
+          callbacks=[curve], checkpoint_freq=0)
+    return _evaluate_and_record(spec, time.perf_counter() - t0, curve.points)
 
 
 # ---------------------------------------------------------------------- analytic controllers (main process)
@@ -399,29 +444,49 @@ def _plot_curves(curves: dict, path: str, title: str) -> None:
     plt.close(fig)
 
 
+SUMMARY_XMAX = 10.0  # the summary figure's axis ends here; larger cost ratios are marked at the edge
+
+
 def _plot_summary(per_env: dict, path: str, title: str) -> None:
+    """Per env, every policy's IQM cost ratio and its 95 % CI on a log axis from below the best ratio
+    to :data:`SUMMARY_XMAX`; a ratio beyond the axis is drawn as an arrow at its edge. Each row is
+    labelled with its figures, so the CIs near 1 stay readable next to failures at 1e4."""
     plt = _plt()
     envs = list(per_env)
     from matplotlib.ticker import NullFormatter
 
-    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs) + 3.0, 0.42 * max(len(r) for r in per_env.values())
-                                                    + 1.8), squeeze=False, sharey=True)
+    labels = list(dict.fromkeys(r["policy"] for rows in per_env.values() for r in rows))  # every env's, in order
+    ypos = {label: len(labels) - 1 - k for k, label in enumerate(labels)}
+    fig, axes = plt.subplots(1, len(envs), figsize=(5.6 * len(envs) + 3.0, 0.42 * len(labels) + 1.8), squeeze=False,
+                             sharey=True)
+    x_lo = min(0.25, 0.8 * min(r["cost_ratio_ci_low"] for rows in per_env.values() for r in rows))
     for ax, env in zip(axes[0], envs):
-        rows = per_env[env]
-        y = np.arange(len(rows))[::-1]
-        for yi, r in zip(y, rows):
+        for r in per_env[env]:
+            yi = ypos[r["policy"]]
             color = {"RL": "tab:blue", "hybrid": "tab:green"}.get(r["kind"], "tab:gray")
             lo, hi, m = r["cost_ratio_ci_low"], r["cost_ratio_ci_high"], r["cost_ratio_iqm"]
-            ax.plot([lo, hi], [yi, yi], color=color, lw=6, alpha=0.45, solid_capstyle="butt")
-            ax.plot([m], [yi], "|", color="k", ms=12)
+            if lo < SUMMARY_XMAX:
+                ax.plot([lo, min(hi, SUMMARY_XMAX)], [yi, yi], color=color, lw=6, alpha=0.45, solid_capstyle="butt")
+            if m < SUMMARY_XMAX:
+                ax.plot([m], [yi], "|", color="k", ms=12)
+            else:
+                ax.plot([SUMMARY_XMAX], [yi], ">", color=color, ms=7, clip_on=False)
+            text = f"{m:.3g}" if lo == hi else f"{m:.3g} [{lo:.3g}, {hi:.3g}]"
+            if r.get("failure_rate"):
+                text += f", {100 * r['failure_rate']:.0f}% fail"
+            ax.annotate(text, (1.0, yi), xycoords=("axes fraction", "data"), ha="left", va="center", fontsize=6.5,
+                        xytext=(8, 0), textcoords="offset points", annotation_clip=False)
         ax.axvline(1.0, color="k", ls="--", lw=1)
-        ax.set_yticks(y, [r["policy"] for r in rows], fontsize=7)
+        ax.set_yticks([ypos[label] for label in labels], labels, fontsize=7)
         ax.set_xscale("log")
+        ax.set_xlim(x_lo, SUMMARY_XMAX)
+        ax.set_ylim(-0.6, len(labels) - 0.4)
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(r"$J / J_{paper}$ (IQM, 95% CI)")
         ax.set_title(env)
         ax.grid(alpha=0.3, axis="x")
-    fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI over training seeds)", fontsize=10)
+    fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI over training seeds; "
+                 f"> {SUMMARY_XMAX:g}: arrow at the edge)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -518,9 +583,15 @@ def replaced_runs(pending: list[dict]) -> list[dict]:
 
 def pending_runs(plan: BenchmarkPlan) -> list[dict]:
     """The specs of ``plan`` that would train: those without a finished result of the same signature
-    and recipe (:func:`_finished_run`). ``[]`` means the benchmark only evaluates the analytic
-    controllers and aggregates the stored results."""
-    return [sp for sp in plan.specs if _stored_result(sp) is None]
+    and recipe (:func:`_finished_run`) and without a kept model trained as asked
+    (:func:`reevaluated_runs`). ``[]`` means the benchmark trains nothing."""
+    return [sp for sp in plan.specs if _stored_result(sp) is None and _stored_model(sp) is None]
+
+
+def reevaluated_runs(plan: BenchmarkPlan) -> list[dict]:
+    """The specs of ``plan`` whose kept model was trained as asked but evaluated on other episodes
+    (another ``eval_seed`` or ``episodes``): the benchmark evaluates it again, without training."""
+    return [sp for sp in plan.specs if _stored_model(sp) is not None]
 
 
 def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
@@ -600,7 +671,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
             rows.append(_aggregate(a.label, a.kind, runs, paper_cost))
             curves[a.label] = _curve_stats(runs)
             detail[a.label] = {f"s{r['seed']}": r["episodes"] for r in runs}
-            train_s[key] = [0.0 if r.get("cached") else r["train_seconds"] for r in runs]
+            train_s[key] = [0.0 if r.get("cached") or r.get("reevaluated") else r["train_seconds"] for r in runs]
         for label in ANALYTIC:
             payloads[label] = [analytic[e][label]]
             rows.append(_aggregate(label, "analytic", [analytic[e][label]], paper_cost))

@@ -285,13 +285,17 @@ def _benchmark(args) -> int:
 
 def _benchmark_dry_run(args, plan) -> int:
     """``benchmark --dry-run``: which runs would train, which stored results are reused (nothing written)."""
-    from .benchmark import pending_runs, replaced_runs
+    from .benchmark import pending_runs, reevaluated_runs, replaced_runs
 
-    todo = pending_runs(plan)
+    todo, again = pending_runs(plan), reevaluated_runs(plan)
     clash = {sp["path"] for sp in replaced_runs(todo)}
-    print(f"{len(todo)} of {len(plan.specs)} runs would train; {len(plan.specs) - len(todo)} stored results "
-          f"in {args.out}/models are reused (same configuration and recipe)")
-    for sp in sorted(todo, key=lambda sp: (sp["env"], sp["agent"], sp["seed"])):
+    reused = len(plan.specs) - len(todo) - len(again)
+    print(f"{len(todo)} of {len(plan.specs)} runs would train; {len(again)} kept models are evaluated again on "
+          f"other episodes; {reused} stored results in {args.out}/models are reused (same configuration and recipe)")
+    key = lambda sp: (sp["env"], sp["agent"], sp["seed"])  # noqa: E731
+    for sp in sorted(todo, key=key):
         note = " (replaces a finished run of another configuration: needs --overwrite)" if sp["path"] in clash else ""
         print(f"  train {sp['env']} {sp['agent']} seed {sp['seed']}: {sp['steps']} steps -> {sp['path']}{note}")
+    for sp in sorted(again, key=key):
+        print(f"  evaluate again {sp['env']} {sp['agent']} seed {sp['seed']} -> {sp['path']}")
     return 0

@@ -168,7 +168,8 @@ def test_cli_dry_run_lists_the_runs_that_would_train(tiny_run, tmp_path, capsys)
     n = len(TINY["agents"]) * TINY["seeds"]
     assert main(["benchmark", "--budget", "tiny", "--out", out, "--dry-run"]) == 0
     assert capsys.readouterr().out.splitlines() == [
-        f"0 of {n} runs would train; {n} stored results in {out}/models are reused (same configuration and recipe)"]
+        f"0 of {n} runs would train; 0 kept models are evaluated again on other episodes; {n} stored results in "
+        f"{out}/models are reused (same configuration and recipe)"]
     # another training budget is another run: nothing reusable
     assert main(["benchmark", "--budget", "tiny", "--out", out, "--dry-run", "--agents", "ppo", "--timesteps", "100"]) == 0
     lines = capsys.readouterr().out.splitlines()
@@ -177,7 +178,7 @@ def test_cli_dry_run_lists_the_runs_that_would_train(tiny_run, tmp_path, capsys)
                         f"(replaces a finished run of another configuration: needs --overwrite)")
     empty = tmp_path / "empty"
     assert main(["benchmark", "--env", "all", "--budget", "tiny", "--out", str(empty), "--dry-run"]) == 0
-    assert capsys.readouterr().out.startswith(f"{4 * n} of {4 * n} runs would train; 0 stored")
+    assert capsys.readouterr().out.startswith(f"{4 * n} of {4 * n} runs would train; 0 kept models")
     assert not empty.exists()
 
 
@@ -245,3 +246,37 @@ def test_a_finished_run_of_another_configuration_is_replaced_only_with_overwrite
     run_benchmark("tracking", "tiny", str(mine), overwrite=True, **kw)
     res = json.load(open(run / "result.json"))
     assert res["signature"]["steps"] == 64 and res["cached"] is False
+
+
+def test_other_evaluation_episodes_evaluate_the_kept_models_again(tiny_run, tmp_path, capsys):
+    """Only the evaluation changed (more episodes): the kept models are evaluated on the new episodes,
+    nothing is trained again and the training record (model, config, learning curve) is untouched."""
+    import shutil
+
+    out, _, _ = tiny_run
+    mine = tmp_path / "bench"
+    run = mine / "models" / "tracking" / "tiny" / "ppo_res" / "s0"
+    shutil.copytree(os.path.join(out, "models", "tracking", "tiny", "ppo_res", "s0"), run)
+    before = json.load(open(run / "result.json"))
+    model = (run / "model.zip").read_bytes()
+    argv = ["benchmark", "--budget", "tiny", "--out", str(mine), "--agents", "ppo_res", "--seeds", "1",
+            "--episodes", "3", "--workers", "1", "--no-progress"]
+    assert main([*argv, "--dry-run"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == ["0 of 1 runs would train; 1 kept models are evaluated again on other episodes; 0 stored results "
+                     f"in {mine}/models are reused (same configuration and recipe)",
+                     f"  evaluate again tracking ppo_res seed 0 -> {run}"]
+    assert main(argv) == 0
+    after = json.load(open(run / "result.json"))
+    assert after["signature"] == {**before["signature"], "eval_seeds": [10_000, 10_001, 10_002]}
+    assert len(after["episodes"]) == 3
+    # the first two episodes are the ones evaluated before: same seeds, same deterministic policy
+    assert [e["cost"] for e in after["episodes"][:2]] == [e["cost"] for e in before["episodes"]]
+    assert after["train_seconds"] == before["train_seconds"] and after["curve"] == before["curve"]
+    assert (run / "model.zip").read_bytes() == model
+    doc = json.load(open(mine / "tracking" / "results.json"))
+    assert doc["train_seconds"]["ppo_res"] == [0.0]
+    capsys.readouterr()
+    assert main([*argv, "--dry-run"]) == 0  # and now it is a stored result of this configuration
+    assert capsys.readouterr().out.startswith("0 of 1 runs would train; 0 kept models are evaluated again on other "
+                                              "episodes; 1 stored results")

@@ -52,3 +52,16 @@ def test_the_readme_table_is_what_the_stored_runs_give(extracted):
     md = open(os.path.join(extracted, "hetero_mas", "results.md")).read().splitlines()
     got = [line for line in md if line.startswith("| ") or line.startswith("Overlapping 95% CIs")]
     assert _readme_table("### RL versus the paper's controller (full budget, hetero_mas)") == got
+
+
+def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
+    """The archive keeps no models: evaluating on other episodes means training again, which would
+    replace the stored records, so the benchmark refuses unless told to overwrite."""
+    from agents.benchmark import RunConflictError, reevaluated_runs, replaced_runs, run_benchmark
+
+    plan = plan_runs("hetero_mas", "full", extracted, episodes=5)
+    todo = pending_runs(plan)
+    assert len(todo) == 80 and len(replaced_runs(todo)) == 80 and reevaluated_runs(plan) == []
+    with pytest.raises(RunConflictError, match="80 finished run"):
+        run_benchmark("hetero_mas", "full", extracted, episodes=5, workers=1, progress=False)
+    assert pending_runs(plan_runs("hetero_mas", "full", extracted)) == []  # nothing was touched
