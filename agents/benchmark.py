@@ -457,10 +457,14 @@ def _plot_summary(per_env: dict, path: str, title: str) -> None:
 
     labels = list(dict.fromkeys(r["policy"] for rows in per_env.values() for r in rows))  # every env's, in order
     ypos = {label: len(labels) - 1 - k for k, label in enumerate(labels)}
-    fig, axes = plt.subplots(1, len(envs), figsize=(5.6 * len(envs) + 3.0, 0.42 * len(labels) + 1.8), squeeze=False,
-                             sharey=True)
+    ncols = min(2, len(envs))  # four envs: a 2 x 2 grid
+    nrows = -(-len(envs) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols + 3.0, (0.42 * len(labels) + 1.3) * nrows + 0.5),
+                             squeeze=False, sharey=True)
+    for ax in axes.flat[len(envs):]:
+        ax.set_visible(False)
     x_lo = min(0.25, 0.8 * min(r["cost_ratio_ci_low"] for rows in per_env.values() for r in rows))
-    for ax, env in zip(axes[0], envs):
+    for ax, env in zip(axes.flat, envs):
         for r in per_env[env]:
             yi = ypos[r["policy"]]
             color = {"RL": "tab:blue", "hybrid": "tab:green"}.get(r["kind"], "tab:gray")
