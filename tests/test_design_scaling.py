@@ -242,6 +242,20 @@ def test_design_keeps_the_error_class_and_names_the_node():
     assert observer_residuals(d).max() <= 1e-15
 
 
+def test_a_measured_direction_lost_to_scaling():
+    """Found by the fuzz test in CI (2026-12-02): the -1e300 entry made the rank decision drop
+    C^T = e1 + e3 from Im T_d (delta 2, the observable subspace has 3), and the result passed the
+    residual checks. Now a named error (or a valid design, should the rank decisions improve)."""
+    A = np.array([[0.0, 0, 0, 1], [0, 0, 0, 1], [0, -1e300, 0, 0], [0, 0, 0, 0]])
+    B, C = np.zeros((4, 0)), np.array([[1.0, 0, 1, 0]])
+    try:
+        res = strong_detectability(A, B, C)
+    except ValueError as exc:
+        assert_named_error(exc)
+        return
+    assert_valid_design(A, B, C, res)
+
+
 # ---------------------------------------------------------------------------
 # fuzz: deterministic (derandomize), FUZZ_EXAMPLES systems of n <= 5 states and
 # FUZZ_EXAMPLES / 2 networks of n <= 4 states and N <= 3 nodes; measured ~20-35 s

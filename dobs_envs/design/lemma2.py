@@ -927,6 +927,18 @@ def _self_check(A, B, C, T_d, E, F, G, margin) -> None:
                 f"Lemma 2 (FUIO): the E = 0 result fails T_d^T = G C (relative residual {r0:.2e}); "
                 "the change of coordinates is too ill-conditioned for double precision"
             )
+    if C.size:  # Im C^T in Im T_d: the rows of C always satisfy Lemma 2 (E = 0, T_d^T = C), so the
+        # maximal T_d holds them; missing one means a rank decision neglected it at the data's scale
+        kc = _pow2_exponents(C, 1)
+        C1 = np.ldexp(C, -kc[:, None])  # rows to unit scale (powers of two: exact)
+        miss = float(np.linalg.norm(C1.T - T_d @ (T_d.T @ C1.T), 2)) / float(np.linalg.norm(C1, 2))
+        if not miss <= _CHECK_TOL:
+            raise IllConditionedError(
+                f"Lemma 2 (FUIO): the computed subspace Im T_d misses a measured direction (Im C^T; "
+                f"relative residual {miss:.2e} > {_CHECK_TOL:g}): a rank decision at the tolerance "
+                "neglected it at the scale of the data, so the result would not be maximal; the system "
+                "is too badly scaled for double precision"
+            )
     if not (rB <= _CHECK_TOL and rA <= _CHECK_TOL):
         ka = _pow2_exponent(A)
         a_norm = float(np.linalg.norm(np.ldexp(A, -ka), 2))
