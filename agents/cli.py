@@ -74,7 +74,8 @@ def add_parser(sub) -> None:
                    help="retrain runs whose directory holds a finished run of another configuration or recipe "
                         "(removes those runs); without it the benchmark refuses to replace them")
     p.add_argument("--dry-run", action="store_true",
-                   help="list the runs that would train and those whose stored results are reused; train nothing")
+                   help="list the runs that would train, the kept models that would be evaluated again and the "
+                        "stored results that are reused; train nothing")
     p.set_defaults(func=_benchmark)
 
 
