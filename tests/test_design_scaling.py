@@ -113,6 +113,16 @@ def assert_named_error(exc: BaseException):
     assert len(str(exc)) > 20
 
 
+def assert_design_or_named_error(A, B, C):
+    """The contract on any input: a valid design (:func:`assert_valid_design`) or a named ValueError."""
+    try:
+        res = strong_detectability(A, B, C)
+    except ValueError as exc:
+        assert_named_error(exc)
+        return
+    assert_valid_design(A, B, C, res)
+
+
 # ---------------------------------------------------------------------------
 # reproducers (each raised RuntimeError before issue 12)
 # ---------------------------------------------------------------------------
@@ -247,13 +257,7 @@ def test_a_measured_direction_lost_to_scaling():
     C^T = e1 + e3 from Im T_d (delta 2, the observable subspace has 3), and the result passed the
     residual checks. Now a named error (or a valid design, should the rank decisions improve)."""
     A = np.array([[0.0, 0, 0, 1], [0, 0, 0, 1], [0, -1e300, 0, 0], [0, 0, 0, 0]])
-    B, C = np.zeros((4, 0)), np.array([[1.0, 0, 1, 0]])
-    try:
-        res = strong_detectability(A, B, C)
-    except ValueError as exc:
-        assert_named_error(exc)
-        return
-    assert_valid_design(A, B, C, res)
+    assert_design_or_named_error(A, np.zeros((4, 0)), np.array([[1.0, 0, 1, 0]]))
 
 
 # ---------------------------------------------------------------------------
@@ -299,13 +303,7 @@ FUZZ_EXAMPLES = 400
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(systems())
 def test_fuzz_strong_detectability(system):
-    A, B, C = system
-    try:
-        res = strong_detectability(A, B, C)
-    except ValueError as exc:
-        assert_named_error(exc)
-        return
-    assert_valid_design(A, B, C, res)
+    assert_design_or_named_error(*system)
 
 
 @st.composite
