@@ -46,7 +46,8 @@ import numpy as np
 
 from .config import ENVS, gym_factory, parallel_factory
 from .evaluate import STEADY_S, TRANSIENT_S, evaluate_policy
-from .stats import interval_estimate
+from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
 
 __all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "reevaluated_runs", "replaced_runs",
            "BenchmarkPlan", "RunConflictError", "format_table", "AgentSpec"]
@@ -65,6 +66,11 @@ class AgentSpec:
     @property
     def kind(self) -> str:
         return "hybrid" if self.hybrid else "RL"
+
+    @property
+    def information(self) -> str:
+        """What the agent observes (the table's information column)."""
+        return INFO_OWN_NODE if self.multi_agent else INFO_POOLED
 
 
 AGENTS = {
@@ -104,9 +110,29 @@ BUDGETS = {
     },
 }
 
-ANALYTIC = ("paper (separation)", "oracle (full state)", "decentralised (no comm.)", "zero input")
+#: the information columns (what a policy observes)
+INFO_POOLED = "pooled: every node's obs"
+INFO_OWN_NODE = "own node + neighbours"
+ANALYTIC_INFO = {"paper (separation)": "own observer's estimate", "oracle (full state)": "full state (privileged)",
+                 "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
+ANALYTIC = tuple(ANALYTIC_INFO)
 PAPER = ANALYTIC[0]
-CURVE_SEED = 20_000  # learning-curve episodes use seeds CURVE_SEED + k (disjoint from the evaluation seeds)
+#: what the "paper (separation)" row is where the paper prints no controller for the task
+PAPER_NOTES = {
+    "hetero_mas": ("hetero_mas: the paper prints no controller for this task (NE1's input is prescribed); the "
+                   "reference is this project's rendezvous law u^k = K^k xhat (an LQR rendezvous gain, "
+                   "dobs_envs/scenarios/mas_tasks.py) on the paper's distributed estimates: the paper's separation "
+                   "principle, not a controller printed in the paper"),
+}
+STATISTICS_DOC = (
+    "rliable definitions with the training run as the statistical unit: a run's score is the mean over its "
+    "evaluation episodes of J / J_paper (a failed episode at its cost with the termination penalty); IQM = "
+    "25%-trimmed mean of the run scores; 95% CI: percentile bootstrap over runs (50000 replicates; over several "
+    "envs, runs resampled within each env); mean J / J_paper with the same CI; P(J < J_paper): probability of "
+    "improvement over the matched (run, episode) pairs (rliable's Mann-Whitney form, ties 1/2), CI by resampling "
+    "whole runs; transient cost and errors: IQM over runs of the run means; analytic controllers are "
+    "deterministic (one run: no interval)")
+CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/seeds.py)
 
 
 # ---------------------------------------------------------------------- one training run (worker process)
@@ -311,20 +337,39 @@ def _matrix(runs: list[dict], key: str) -> np.ndarray:
     return np.array([[e[key] for e in r["episodes"]] for r in runs], dtype=np.float64)
 
 
-def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray) -> dict:
-    """Row of the results table from ``runs`` (one payload per training seed)."""
+def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray, *, information: str,
+               steps: int | None = None) -> dict:
+    """Row of the results table from ``runs`` (one payload per training run; one for a deterministic
+    analytic controller).
+
+    The training run is the statistical unit (:mod:`agents.stats`): a run's score is the mean of its
+    per-episode values (cost ratio ``J / J_paper``, failed episodes at their penalty cost; likewise the
+    transient cost and the errors); the row gives the IQM of the run scores with a 95 % percentile
+    bootstrap CI over runs, the mean cost ratio with its CI (a failure cannot be trimmed away), the
+    probability of improvement ``P(J < J_paper)`` over the matched (run, episode) pairs with its CI
+    over runs, and the failure rate over every episode. ``cost_ratio_episode_iqm`` is the IQM over
+    every (run, episode): the spread over episodes, reported for reference only."""
     cost = _matrix(runs, "cost")
     ratio = cost / paper_cost[None, :]
-    row = {"policy": label, "kind": kind, "runs": len(runs), "episodes": cost.shape[1]}
+    row = {"policy": label, "kind": kind, "information": information, "runs": len(runs), "episodes": cost.shape[1],
+           "env_steps": steps, "train_seconds_median": None}
+    if steps is not None:
+        row["train_seconds_median"] = float(np.median([r["train_seconds"] for r in runs]))
     for key, mat in (("cost_ratio", ratio), ("transient_cost", _matrix(runs, "transient_cost")),
                      ("steady_state_error", _matrix(runs, "steady_state_error")),
                      ("final_tracking_error", _matrix(runs, "final_tracking_error"))):
-        est = interval_estimate(mat)
+        est = interval_estimate(run_scores(mat))
         row[f"{key}_iqm"], row[f"{key}_ci_low"], row[f"{key}_ci_high"] = est["iqm"], est["ci_low"], est["ci_high"]
+    mean = mean_estimate(run_scores(ratio))
+    row["cost_ratio_mean"], row["cost_ratio_mean_ci_low"], row["cost_ratio_mean_ci_high"] = \
+        mean["mean"], mean["ci_low"], mean["ci_high"]
+    poi = improvement_estimate(cost, paper_cost)
+    row["poi"], row["poi_ci_low"], row["poi_ci_high"] = poi["poi"], poi["ci_low"], poi["ci_high"]
+    row["cost_ratio_episode_iqm"] = float(iqm(ratio))
     row["failure_rate"] = float(np.mean(_matrix(runs, "failed")))
+    row["run_scores"] = run_scores(ratio).tolist()
     flat = [e for r in runs for e in r["episodes"]]
-    summ = summarise_dicts(flat)
-    row.update(summ)
+    row.update(summarise_dicts(flat))
     return row
 
 
@@ -338,23 +383,45 @@ def summarise_dicts(episodes: list[dict]) -> dict:
     return out
 
 
+def aggregate_over_envs(per_env: dict) -> list[dict]:
+    """Every policy present on all of ``per_env``'s environments with the same number of runs:
+    IQM and mean of its run scores over the ``(runs, envs)`` matrix, with rliable's stratified
+    bootstrap (runs resampled within each environment)."""
+    envs = list(per_env)
+    out = []
+    if len(envs) < 2:
+        return out
+    for label in dict.fromkeys(r["policy"] for r in per_env[envs[0]]):
+        rows = [next((r for r in per_env[e] if r["policy"] == label), None) for e in envs]
+        if any(r is None for r in rows) or len({len(r["run_scores"]) for r in rows}) != 1:
+            continue
+        m = np.array([r["run_scores"] for r in rows]).T  # (runs, envs)
+        est, mean = interval_estimate(m), mean_estimate(m)
+        out.append({"policy": label, "kind": rows[0]["kind"], "envs": envs, "runs": m.shape[0],
+                    "cost_ratio_iqm": est["iqm"], "cost_ratio_ci_low": est["ci_low"], "cost_ratio_ci_high": est["ci_high"],
+                    "cost_ratio_mean": mean["mean"], "cost_ratio_mean_ci_low": mean["ci_low"],
+                    "cost_ratio_mean_ci_high": mean["ci_high"]})
+    return out
+
+
 def _curve_stats(runs: list[dict]) -> dict | None:
-    """IQM and CI of the learning curves over training seeds, at the points all runs share."""
+    """IQM and CI over runs of the learning curves (a run's score at a point: the mean of its cost
+    ratios over the curve episodes), at the points all runs share."""
     curves = [r.get("curve") or [] for r in runs]
     if not curves or not all(curves):
         return None
     n = min(len(c) for c in curves)
     steps, iq, lo, hi = [], [], [], []
     for i in range(n):
-        mat = np.array([c[i]["cost_ratio"] for c in curves])
-        est = interval_estimate(mat, reps=5_000)
+        est = interval_estimate(np.array([np.mean(c[i]["cost_ratio"]) for c in curves]), reps=5_000)
         steps.append(int(np.median([c[i]["env_steps"] for c in curves])))
         iq.append(est["iqm"]); lo.append(est["ci_low"]); hi.append(est["ci_high"])
     return {"env_steps": steps, "iqm": iq, "ci_low": lo, "ci_high": hi}
 
 
 def _overlaps(rows: list[dict]) -> list[list[str]]:
-    """Pairs of policies whose cost-ratio CIs overlap."""
+    """Pairs of policies whose cost-ratio CIs overlap (a secondary remark; the paired comparison with
+    the paper's controller is the probability of improvement)."""
     out = []
     for i, a in enumerate(rows):
         for b in rows[i + 1:]:
@@ -363,31 +430,50 @@ def _overlaps(rows: list[dict]) -> list[list[str]]:
     return out
 
 
+def _interval(r: dict, value: str, prefix: str, fmt: str = ".3g") -> str:
+    """``r[value] [r[prefix_ci_low], r[prefix_ci_high]]``, or the value alone for a deterministic
+    controller (one run: the interval is the point)."""
+    m = f"{r[value]:{fmt}}"
+    return m if r["runs"] == 1 else f"{m} [{r[f'{prefix}_ci_low']:{fmt}}, {r[f'{prefix}_ci_high']:{fmt}}]"
+
+
+def _cells(r: dict) -> dict:
+    """The table's cells of a row (shared by the text and the Markdown tables)."""
+    steps = "-" if r.get("env_steps") is None else f"{r['env_steps'] / 1000:g}k"
+    secs = "-" if r.get("train_seconds_median") is None else f"{r['train_seconds_median']:.0f} s"
+    return {"policy": r["policy"], "kind": r["kind"], "information": r["information"], "runs": str(r["runs"]),
+            "steps": steps, "time": secs, "iqm": _interval(r, "cost_ratio_iqm", "cost_ratio"),
+            "mean": _interval(r, "cost_ratio_mean", "cost_ratio_mean"), "poi": _interval(r, "poi", "poi", ".2f"),
+            "transient": f"{r['transient_cost_iqm']:.4g}", "steady": f"{r['steady_state_error_iqm']:.3g}",
+            "fail": f"{r['failure_rate']:.0%}"}
+
+
+TABLE_COLUMNS = (("policy", "policy"), ("kind", "kind"), ("information", "information"), ("runs", "runs"),
+                 ("steps", "env steps per run"), ("time", "train time per run (median)"),
+                 ("iqm", "J / J_paper: IQM over runs [95% CI]"), ("mean", "mean J / J_paper [95% CI]"),
+                 ("poi", "P(J < J_paper) [95% CI]"), ("transient", f"transient cost (first {TRANSIENT_S:g} s)"),
+                 ("steady", f"steady-state error (RMS, last {STEADY_S:g} s)"), ("fail", "failures"))
+
+
 def format_table(rows: list[dict]) -> str:
-    """Text table: cost ratio IQM [95 % CI], transient cost, steady-state error, failures."""
-    head = (f"{'policy':44s} | {'kind':8s} | runs | {'J / J_paper: IQM [95% CI]':30s} | "
-            f"{f'transient J (<{TRANSIENT_S:g} s)':>18s} | {f'steady err (last {STEADY_S:g} s)':>22s} | fail")
+    """Text table of :data:`TABLE_COLUMNS`."""
+    cells = [_cells(r) for r in rows]
+    width = {k: max(len(h), *(len(c[k]) for c in cells)) for k, h in TABLE_COLUMNS}
+    head = " | ".join(f"{h:{width[k]}s}" for k, h in TABLE_COLUMNS)
     lines = [head, "-" * len(head)]
-    for r in rows:
-        ci = f"{r['cost_ratio_iqm']:.3g} [{r['cost_ratio_ci_low']:.3g}, {r['cost_ratio_ci_high']:.3g}]"
-        lines.append(f"{r['policy']:44s} | {r['kind']:8s} | {r['runs']:4d} | {ci:30s} | "
-                     f"{r['transient_cost_iqm']:>18.4g} | {r['steady_state_error_iqm']:>22.4g} | "
-                     f"{r['failure_rate']:4.0%}")
+    lines += [" | ".join(f"{c[k]:{width[k]}s}" for k, _ in TABLE_COLUMNS) for c in cells]
     return "\n".join(lines)
 
 
-def format_markdown(rows: list[dict], overlaps: list[list[str]] | None = None) -> str:
-    """The :func:`format_table` columns as a Markdown table (``results.md``), then the pairs of
-    policies whose cost-ratio CIs overlap (their ranking is not resolved by these seeds)."""
-    lines = [f"| policy | kind | runs | J / J_paper IQM [95% CI] | transient cost (first {TRANSIENT_S:g} s) | "
-             f"steady-state error (RMS, last {STEADY_S:g} s) | failures |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        ci = (f"{r['cost_ratio_iqm']:.3g}" if r["runs"] == 1 and r["kind"] == "analytic" else
-              f"{r['cost_ratio_iqm']:.3g} [{r['cost_ratio_ci_low']:.3g}, {r['cost_ratio_ci_high']:.3g}]")
-        lines.append(f"| {r['policy']} | {r['kind']} | {r['runs']} | {ci} | {r['transient_cost_iqm']:.4g} | "
-                     f"{r['steady_state_error_iqm']:.3g} | {r['failure_rate']:.0%} |")
+def format_markdown(rows: list[dict], overlaps: list[list[str]] | None = None, note: str | None = None) -> str:
+    """The :data:`TABLE_COLUMNS` as a Markdown table (``results.md``), then the note on the paper's row
+    (if any) and, as a secondary remark, the pairs of policies whose cost-ratio CIs overlap."""
+    lines = ["| " + " | ".join(h for _, h in TABLE_COLUMNS) + " |", "|" + "---|" * len(TABLE_COLUMNS)]
+    lines += ["| " + " | ".join(c[k] for k, _ in TABLE_COLUMNS) + " |" for c in map(_cells, rows)]
+    if note:
+        lines += ["", f"Note: {note}."]
     if overlaps is not None:
-        lines += ["", "Overlapping 95% CIs of J / J_paper: " +
+        lines += ["", "Overlapping 95% CIs of the IQM of J / J_paper: " +
                   ("; ".join(f"{a} / {b}" for a, b in overlaps) if overlaps else "none") + "."]
     return "\n".join(lines) + "\n"
 
@@ -550,8 +636,10 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    eval_seeds = [eval_seed + k for k in range(episodes)]
-    curve_seeds = [CURVE_SEED + k for k in range(B["curve_episodes"])]
+    # the three seed ranges (agents/seeds.py): training seeds, evaluation episodes, tuning episodes
+    check_training_seeds(seed, n_seeds, name="seed")
+    eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
+    curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
     specs = []
     for e in env_names:
@@ -672,13 +760,14 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
             a = AGENTS[key]
             runs = [results[(e, key, s)] for s in range(seed, seed + n_seeds)]
             payloads[a.label] = runs
-            rows.append(_aggregate(a.label, a.kind, runs, paper_cost))
+            rows.append(_aggregate(a.label, a.kind, runs, paper_cost, information=a.information, steps=plan[key]))
             curves[a.label] = _curve_stats(runs)
             detail[a.label] = {f"s{r['seed']}": r["episodes"] for r in runs}
             train_s[key] = [0.0 if r.get("cached") or r.get("reevaluated") else r["train_seconds"] for r in runs]
-        for label in ANALYTIC:
+        for label in analytic[e]:
             payloads[label] = [analytic[e][label]]
-            rows.append(_aggregate(label, "analytic", [analytic[e][label]], paper_cost))
+            rows.append(_aggregate(label, "analytic", [analytic[e][label]], paper_cost,
+                                   information=ANALYTIC_INFO[label]))
             detail[label] = {"deterministic": analytic[e][label]["episodes"]}
         table = format_table(rows)
         task_label = r"disagreement $\|p - \bar p 1\|$" if e == "hetero_mas" else r"task error $\|x - x_r\|$ or $\|x\|$"
@@ -688,25 +777,30 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
             "env": e, "budget": budget, "training_seeds": list(range(seed, seed + n_seeds)), "eval_seeds": eval_seeds,
             "curve_seeds": curve_seeds, "episodes": episodes, "env_kwargs": env_kwargs, "train_steps": plan,
             "train_seconds": train_s, "paper_cost": paper_cost.tolist(),
-            "statistics": ("rliable definitions: IQM = 25%-trimmed mean over (training seed, episode); 95% CI by "
-                           "stratified bootstrap over training seeds within each episode (50000 replicates, "
-                           "percentile); analytic controllers are deterministic (one run: the CI is the point)"),
+            "statistics": STATISTICS_DOC,
             "metrics_doc": {
                 "cost_ratio": "J_policy / J_paper on the same episode; J = -return (LQ cost incl. termination penalty)",
                 "transient_cost": f"cost incurred in the first {TRANSIENT_S:g} s",
                 "steady_state_error": f"RMS of the task error over the last {STEADY_S:g} s",
                 "failure_rate": "fraction of episodes terminated early (state bound exceeded / non-finite)",
+                "poi": "probability of improvement P(J_policy < J_paper) over matched (run, episode) pairs",
+                "cost_ratio_episode_iqm": "IQM over every (run, episode): the spread over episodes, for reference",
+                "train_seconds_median": "median over runs of the training wall time when the run was trained",
             },
+            "paper_note": PAPER_NOTES.get(e),
             "results": rows, "ci_overlaps": _overlaps(rows), "learning_curves": curves, "episodes_detail": detail,
             "table": table,
         }
         with open(os.path.join(edir, "results.json"), "w") as fh:
             json.dump(doc, fh, indent=1)
-        cols = ["policy", "kind", "runs", "episodes"] + [f"{k}_{s}" for k in (
-            "cost_ratio", "transient_cost", "steady_state_error", "final_tracking_error") for s in ("iqm", "ci_low", "ci_high")] \
-            + ["failure_rate", "return_mean", "return_std", "control_effort_mean", "rms_estimation_error_mean"]
+        cols = ["policy", "kind", "information", "runs", "episodes", "env_steps", "train_seconds_median"] + [
+            f"{k}_{s}" for k in ("cost_ratio", "transient_cost", "steady_state_error", "final_tracking_error")
+            for s in ("iqm", "ci_low", "ci_high")] \
+            + ["cost_ratio_mean", "cost_ratio_mean_ci_low", "cost_ratio_mean_ci_high", "poi", "poi_ci_low",
+               "poi_ci_high", "cost_ratio_episode_iqm", "failure_rate", "return_mean", "return_std",
+               "control_effort_mean", "rms_estimation_error_mean"]
         with open(os.path.join(edir, "results.md"), "w") as fh:
-            fh.write(format_markdown(rows, doc["ci_overlaps"]))
+            fh.write(format_markdown(rows, doc["ci_overlaps"], PAPER_NOTES.get(e)))
         with open(os.path.join(edir, "results.csv"), "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
             w.writeheader()
@@ -717,8 +811,10 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     summary = {"budget": budget, "envs": env_names, "training_seeds": list(range(seed, seed + n_seeds)),
                "eval_seeds": eval_seeds, "workers": n_workers,
                "timings_s": {"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start},
+               "statistics": STATISTICS_DOC,
                "tables": {e: docs[e]["table"] for e in env_names},
-               "results": {e: per_env_rows[e] for e in env_names}}
+               "results": {e: per_env_rows[e] for e in env_names},
+               "aggregate_over_envs": aggregate_over_envs(per_env_rows)}
     with open(os.path.join(out, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1)
     return summary

@@ -8,6 +8,7 @@ import sys
 import time
 
 from .benchmark import AGENTS, BUDGETS
+from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
 from .config import ALGOS, ENVS
 
 __all__ = ["add_parser"]
@@ -27,7 +28,7 @@ def add_parser(sub) -> None:
     p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
                    help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
                         "by behaviour cloning of the paper's controller (centralised PPO)")
-    p.add_argument("--seed", type=int, default=None, help="training seed (default 0)")
+    p.add_argument("--seed", type=int, default=None, help=f"training seed (default 0; the {TRAINING})")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
@@ -49,7 +50,9 @@ def add_parser(sub) -> None:
     p.add_argument("--model", required=True,
                    help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip)")
     p.add_argument("--episodes", type=_positive_int, default=10)
-    p.add_argument("--seed", type=int, default=10_000, help="episode k is reset with seed + k")
+    p.add_argument("--seed", type=int, default=TUNING.start,
+                   help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "
+                        f"model selection; the {EVALUATION} holds the benchmark's evaluation episodes)")
     p.add_argument("--json", default=None, help="also write the summary to this file")
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept a run whose config.json names 'package.module:factory' (imports that code; "
@@ -65,7 +68,8 @@ def add_parser(sub) -> None:
     p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="parallel training processes (default: the number of CPU cores)")
-    p.add_argument("--eval-seed", type=int, default=10_000, help="episode k of every policy is reset with eval_seed + k")
+    p.add_argument("--eval-seed", type=int, default=EVALUATION.start,
+                   help=f"episode k of every policy is reset with eval_seed + k (inside the {EVALUATION})")
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
@@ -156,6 +160,10 @@ def _train(args) -> int:
         return _resume(args)
     args.algo = args.algo or "ppo"
     args.seed = 0 if args.seed is None else args.seed
+    try:  # a training seed's env copies must not replay evaluation or tuning episodes (agents/seeds.py)
+        check_training_seeds(args.seed, 1, name="--seed")
+    except ValueError as exc:
+        _usage_error(str(exc))
     args.multi_agent = bool(args.multi_agent)
     try:
         env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,

@@ -38,6 +38,7 @@ from dobs_envs.registry import get as registry_entry
 
 from .config import ACTIVATIONS, ENVS, MULTI_AGENT_ALGOS, env_key, gym_factory, load_hyperparams, parallel_factory
 from .core_vec_env import CoreVecEnv
+from .seeds import BC_DEMONSTRATION_OFFSET, resume_seed
 from .vec_env import ParallelVecEnv, SlotEncoder
 
 __all__ = ["train", "resume", "resume_point", "load_agent", "TrainedAgent", "TrainingInterrupted", "RunDirError",
@@ -420,6 +421,18 @@ def _algo_kwargs(recipe: Recipe, venv) -> dict:
     return algo_kw
 
 
+def _quiet_logger(model) -> None:
+    """Without TensorBoard, give the model a logger that writes nowhere but stdout (``verbose >= 1``):
+    SB3's default creates an empty ``SB3-<date>`` directory in the temp dir for every run."""
+    if getattr(model, "tensorboard_log", None) is not None:
+        return  # SB3 logs into the TensorBoard directory (no temp directory)
+    import sys
+
+    from stable_baselines3.common.logger import HumanOutputFormat, Logger
+
+    model.set_logger(Logger(folder=None, output_formats=[HumanOutputFormat(sys.stdout)] if model.verbose >= 1 else []))
+
+
 def _learn(model, venv, config: dict, out: str, *, progress: bool, callbacks: list | None,
            previous_seconds: float = 0.0) -> TrainResult:
     """Learn up to the run's budget (continuing from ``model.num_timesteps``), save the run; on SIGINT
@@ -443,6 +456,7 @@ def _learn(model, venv, config: dict, out: str, *, progress: bool, callbacks: li
             cb.agent_config = config
     config.update(status=RUNNING, timesteps_done=start // n_agents, sb3_timesteps=start)
     _write_json(os.path.join(out, "config.json"), config)  # a run killed outright resumes from its checkpoints
+    _quiet_logger(model)
     t0 = time.perf_counter()
     with _StopOnSigint() as stop:  # kept through the saves: no Ctrl-C cuts them short
         model.learn(total_timesteps=sb3_steps - start, callback=CallbackList(callbacks + [stop.callback()]),
@@ -525,7 +539,7 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     if hybrid == "bc":
         bc = recipe.bc
         kw = s.config["train_env_kwargs"]
-        data = behaviour_cloning_dataset(gym_factory(env, kw), bc["episodes"], seed=10_000_000 + seed,
+        data = behaviour_cloning_dataset(gym_factory(env, kw), bc["episodes"], seed=BC_DEMONSTRATION_OFFSET + seed,
                                          noise=bc["noise"])
         s.config["bc"] = pretrain_ppo(model, data, epochs=bc["epochs"], lr=bc["lr"], seed=seed)
     return _learn(model, s.venv, s.config, out, progress=progress, callbacks=callbacks)
@@ -583,7 +597,7 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
 
     The model, the normaliser statistics and (off-policy, after a SIGINT) the replay buffer are
     restored and SB3 keeps counting timesteps (schedules continue); the environments restart
-    with fresh episodes (seed ``seed + timesteps done``), so the result is not bit-identical to an
+    with fresh episodes (seed ``agents.seeds.resume_seed(seed, timesteps done)``), so the result is not bit-identical to an
     uninterrupted run. An off-policy run resumed from a checkpoint starts with an empty replay
     buffer. Interrupting again works as in :func:`train`.
     """
@@ -599,7 +613,7 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     algo, n_agents = cfg["algo"], int(cfg["n_agents"])
     recipe = recipe_from_hyperparams(algo, name, dict(cfg["hyperparams"]), multi_agent=bool(cfg["multi_agent"]),
                                      hybrid=cfg.get("hybrid"))
-    seed = int(cfg["seed"]) + point.sb3_timesteps // n_agents
+    seed = resume_seed(int(cfg["seed"]), point.sb3_timesteps // n_agents)  # never an evaluation/tuning episode
     s = _setup(name, name, algo, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), recipe=recipe,
                timesteps=int(cfg["timesteps"]), seed=seed, env_kwargs=cfg.get("env_kwargs"),
                checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))

@@ -57,6 +57,47 @@ def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
     assert eps["s0"][0]["cost"] != eps["s1"][0]["cost"]
 
 
+def test_rows_state_information_budget_and_run_level_statistics(tiny_run):
+    """The training run is the statistical unit: each row's IQM, CI, mean and probability of
+    improvement are those of agents.stats applied to the per-run scores recomputed here from the
+    stored per-episode costs; every row says what it sees, learned rows their budget."""
+    from agents.stats import improvement_estimate, interval_estimate, mean_estimate, run_scores
+
+    _, _, doc = tiny_run
+    paper = np.array(doc["paper_cost"])
+    for r in doc["results"]:
+        assert r["information"], r["policy"]
+        eps = doc["episodes_detail"][r["policy"]]
+        cost = np.array([[e["cost"] for e in run] for run in eps.values()])
+        s = run_scores(cost / paper)
+        assert r["run_scores"] == pytest.approx(s.tolist(), rel=1e-12)
+        est, mean, poi = interval_estimate(s), mean_estimate(s), improvement_estimate(cost, paper)
+        assert (r["cost_ratio_iqm"], r["cost_ratio_ci_low"], r["cost_ratio_ci_high"]) == \
+            pytest.approx((est["iqm"], est["ci_low"], est["ci_high"]), rel=1e-12)
+        assert (r["cost_ratio_mean"], r["poi"], r["poi_ci_low"]) == \
+            pytest.approx((mean["mean"], poi["poi"], poi["ci_low"]), rel=1e-12)
+        learned = r["kind"] != "analytic"
+        assert (r["env_steps"] is not None) == learned and (r["train_seconds_median"] is not None) == learned
+    rows = {r["policy"]: r for r in doc["results"]}
+    assert rows["paper (separation)"]["poi"] == 0.5  # ties with itself on every episode
+    assert rows[AGENTS["ppo"].label]["env_steps"] == TINY["agents"]["ppo"]
+    assert rows[AGENTS["ppo"].label]["information"] != rows[AGENTS["ppo_ma"].label]["information"]
+    assert rows[AGENTS["ppo"].label]["train_seconds_median"] > 0
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"eval_seed": 20_000}, "evaluation range"),     # tuning episodes are not evaluation episodes
+    ({"eval_seed": 19_999, "episodes": 2}, "evaluation range"),
+    ({"seed": 9_990}, "training range"),              # its env copies would reach the evaluation range
+    ({"seed": -1}, "training range"),
+])
+def test_seed_ranges_are_disjoint(kwargs, match, tmp_path):
+    from agents.benchmark import plan_runs
+
+    with pytest.raises(ValueError, match=match):
+        plan_runs("tracking", "tiny", str(tmp_path), **kwargs)
+
+
 def test_same_seeds_and_initial_states_for_every_policy_and_run(tiny_run):
     _, _, doc = tiny_run
     seeds = doc["eval_seeds"]
