@@ -354,6 +354,10 @@ class PooledKalmanFilter:
                     f"(pooled nodes {P.y_nodes}, estimates {'used' if ne else 'unused'})")
         x_m, x_P = _x0_prior(e)
         Qp = (process_std ** 2) * np.eye(ns)
+        # forget past pooled estimates in the directions only they measure: e_j is strongly
+        # autocorrelated and decays (Theorem 1), so the newest xhat_j is the information, not an
+        # average over the history (random walk of variance sigma_e^2 per period: Kalman gain ~0.6)
+        Qp[:n, :n] += (est_std ** 2) * (W @ W.T)
         if self.mv:
             v_m, v_P, v_Q = _v_prior(e, self.model)
             self.m0 = np.concatenate([x_m, v_m])
