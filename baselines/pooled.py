@@ -95,8 +95,11 @@ the infinite-horizon (average-cost) problem gives::
 with ``xhat_k``, ``vhat_k`` from the Kalman filter and ``x_r``, ``w`` reconstructed exactly
 from the observed ``r`` history and ``t = kT`` (certainty equivalence: LQG-optimal for the
 Gaussian surrogate). If ``(Q^{1/2}, Ad)`` has unobservable modes on the unit circle (the
-rendezvous cost of hetero_mas_v0 does not weigh the mean position), ``Q + eps I``
-with ``eps = 1e-6 lambda_max(Q)`` is used (``q_regularization``).
+rendezvous cost of hetero_mas_v0 does not weigh the mean position: the DARE solution leaves
+that mode at ``|lambda| = 1 - 3e-9``), ``Q + eps I`` with ``eps = 1e-6 lambda_max(Q)`` is used
+(``q_regularization``; the spectral radius must stay ``1e-6`` below 1, which also keeps the
+Stein equation well posed). On hetero_mas_v0 this gives the unweighted mean position a time
+constant of about 10^3 s: within an episode, the cost-optimal "leave it" behaviour.
 
 Calling convention as :mod:`baselines.references`: ``policy = PooledKalmanPolicy(penv)``
 on a dobs_envs PettingZoo parallel env, ``policy.reset()`` at every episode start, then
@@ -118,6 +121,8 @@ __all__ = ["PooledObservationError", "PooledObservation", "PooledKalmanFilter", 
 
 #: tolerance on |eigenvalue| of the unobservable block below 1 for detectability
 DETECT_TOL = 1e-9
+#: margin of the LQ closed loop's spectral radius below 1 (else Q is regularised)
+STAB_TOL = 1e-6
 
 
 class PooledObservationError(ValueError):
@@ -489,8 +494,10 @@ def lq_tracking_gains(Ad, Bd, Gd, Phi, M, Q, R):
     Hk = R + Bd.T @ P @ Bd
     Kx = solve(Hk, Bd.T @ P @ Ad, assume_a="pos")
     Acl = Ad - Bd @ Kx
-    if np.max(np.abs(np.linalg.eigvals(Acl))) >= 1.0:
-        raise np.linalg.LinAlgError("the DARE solution does not stabilise (Ad, Bd)")
+    rad = float(np.max(np.abs(np.linalg.eigvals(Acl))))
+    if rad >= 1.0 - STAB_TOL:  # e.g. a mode the cost does not weigh, left on the unit circle
+        raise np.linalg.LinAlgError(f"the DARE solution does not stabilise (Ad, Bd): spectral radius {rad:.12g} "
+                                    f">= 1 - {STAB_TOL:g}")
     nx, nxi = Ad.shape[0], Phi.shape[0]
     if nxi == 0:
         return Kx, np.zeros((Bd.shape[1], 0)), P
@@ -590,7 +597,7 @@ class PooledLQGPolicy(_PooledBase):
                 self.q_regularization = 1e-6 * float(np.max(np.linalg.eigvalsh(Q)))
         if self.q_regularization:
             Qr = Q + self.q_regularization * np.eye(n)
-            gains = lq_tracking_gains(Ad, Bd, Gd, Phi, M - 0.0, Qr, R)
+            gains = lq_tracking_gains(Ad, Bd, Gd, Phi, M, Qr, R)
         self.Kx, self.Kxi, self.P_lq = gains
         self.reset()
 

@@ -252,5 +252,17 @@ def test_every_baseline_states_what_it_sees():
         assert isinstance(cls.information, str) and cls.information
     for cls in (OraclePolicy, DecentralizedPolicy, ZeroInputPolicy, PooledKalmanPolicy, PooledLQGPolicy):
         assert isinstance(cls.name, str) and cls.name
-    assert PooledLQGPolicy(env).q_regularization >= 0.0
     env.close()
+
+
+def test_lq_regularises_only_an_unweighted_marginal_mode():
+    """hetero_mas's rendezvous cost does not weigh the mean position (a mode on the unit circle):
+    Q + 1e-6 lambda_max(Q) I; tracking's Q = I needs nothing. Both closed loops are Schur."""
+    for name, reg in (("hetero_mas_v0", True), ("tracking_v0", False)):
+        env = _make(name, max_cycles=5)
+        p = PooledLQGPolicy(env)
+        assert (p.q_regularization > 0) == reg
+        n = p.filter.n
+        Acl = p.filter.F[:n, :n] - p.filter.G[:n] @ p.Kx
+        assert np.max(np.abs(np.linalg.eigvals(Acl))) < 1 - 1e-6
+        env.close()
