@@ -101,6 +101,27 @@ that mode at ``|lambda| = 1 - 3e-9``), ``Q + eps I`` with ``eps = 1e-6 lambda_ma
 Stein equation well posed). On hetero_mas_v0 this gives the unweighted mean position a time
 constant of about 10^3 s: within an episode, the cost-optimal "leave it" behaviour.
 
+Measured (tuning seeds 20000-20019, default env options; J/J_paper per episode: IQM / mean;
+transient = cost of the first 2 s; sse = RMS task error over the last 5 s; no failures)::
+
+    env                    paper          oracle (x)           PooledKalman         PooledLQG
+    tracking               1 / 1          0.334 / 0.340        0.333 / 0.341        0.296 / 0.302
+      transient, sse       1074, 0.029    324, 0.026           324, 0.026           269, 0.41
+    disturbance_rejection  1 / 1          0.581 / 0.547        0.584 / 0.549        0.424 / 0.396
+      transient, sse       190, 0.30      33.4, 0.22           34.0, 0.22           29.7, 1.12
+    hetero_mas             1 / 1          0.627 / 0.630        0.628 / 0.630        0.627 / 0.629
+      transient, sse       262, 8.9e-4    195, 1.4e-3          195, 1.4e-3          194, 5.2e-6
+    random_network         1 / 1          0.225 / 0.294        0.228 / 0.298        0.222 / 0.289
+      transient, sse       8.12, 6.6e-5   1.56, 7.6e-7         1.58, 7.7e-7         1.52, 3.0e-6
+
+The pooled estimate matches the full-state oracle to 0.1-1.5 % of the cost (its error is the
+prior's at t = 0 and float32 rounding after a few periods). Tried on the same seeds:
+``meas_std`` 1e-7 (identical), 1e-2 (0.1-1 % worse); ``discretization="exact"`` (within
+0.2 %); ``estimates="all"`` with constant ``R`` (tracking -0.3 %, disturbance +1.7 %,
+hetero +2 %; estimate RMS error 0.14-0.24 instead of 0.05): defaults kept. With
+``disturbance="random"`` the random-walk ``v`` model makes PooledLQG worse than the oracle
+(0.36 vs 0.32): it is LQ-optimal only for the modelled disturbance.
+
 Calling convention as :mod:`baselines.references`: ``policy = PooledKalmanPolicy(penv)``
 on a dobs_envs PettingZoo parallel env, ``policy.reset()`` at every episode start, then
 ``policy(observations) -> actions``; ``Centralized(gym_env, PooledKalmanPolicy)`` for the
