@@ -5,7 +5,11 @@
 - :mod:`baselines.policies`: those controllers as ``policy(observations) -> actions``.
 - :mod:`baselines.references`: the full-state oracle, decentralised control without
   communication, zero input (same calling convention).
+- :mod:`baselines.pooled`: the centralised agent's information (every controller node's local
+  observation pooled): Kalman filter + the task's paper law, and LQG on the task's cost.
 """
+from .pooled import PooledKalmanPolicy, PooledLQGPolicy
 from .references import Centralized, DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
 
-__all__ = ["OraclePolicy", "DecentralizedPolicy", "ZeroInputPolicy", "Centralized"]
+__all__ = ["OraclePolicy", "DecentralizedPolicy", "ZeroInputPolicy", "Centralized", "PooledKalmanPolicy",
+           "PooledLQGPolicy"]

@@ -59,6 +59,8 @@ class SeparationPolicy:
         ``"adaptive_sliding_mode"``, the heterogeneous-MAS one's ``"feedback"``).
     """
 
+    information = "own observer node"
+
     KINDS = ("open_loop", "feedback", "tracking", "sliding_mode", "adaptive_sliding_mode")
 
     def __init__(self, env, kind: str | None = None):

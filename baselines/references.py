@@ -103,6 +103,7 @@ class OraclePolicy(_EstimateSubstitution):
     """
 
     name = "oracle (full state)"
+    information = "full state"
 
     def __init__(self, env, kind=None):
         super().__init__(env, kind)
@@ -117,6 +118,7 @@ class DecentralizedPolicy(_EstimateSubstitution):
     """No communication: each controller's own consensus-free local observer (see module doc)."""
 
     name = "decentralised (no communication)"
+    information = "own measurement, no communication"
 
     def __init__(self, env, kind=None):
         super().__init__(env, kind)
@@ -184,6 +186,7 @@ class ZeroInputPolicy(ZeroPolicy):
     under the benchmark's name."""
 
     name = "zero input"
+    information = "none"
 
 
 class Centralized:
