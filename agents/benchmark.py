@@ -113,7 +113,10 @@ BUDGETS = {
 #: the information columns (what a policy observes)
 INFO_POOLED = "pooled: every node's obs"
 INFO_OWN_NODE = "own node + neighbours"
-ANALYTIC_INFO = {"paper (separation)": "own observer's estimate", "oracle (full state)": "full state (privileged)",
+ANALYTIC_INFO = {"paper (separation)": "own observer's estimate",
+                 "Kalman on pooled obs + paper law": INFO_POOLED,
+                 "LQG on pooled obs (task's Q, R)": INFO_POOLED,
+                 "oracle (full state)": "full state (privileged)",
                  "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
 ANALYTIC = tuple(ANALYTIC_INFO)
 PAPER = ANALYTIC[0]
@@ -305,15 +308,24 @@ def _train_and_evaluate(spec: dict) -> dict:
 
 
 # ---------------------------------------------------------------------- analytic controllers (main process)
-def _analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
+def _analytic_policies(penv) -> list:
+    """The analytic controllers in :data:`ANALYTIC` order, built on the parallel env ``penv``:
+    the paper's separation controller; the same law on a Kalman estimate from the centralised
+    agent's information (every node's observation pooled) and the LQ-optimal controller for the
+    task's own cost on that information (:mod:`baselines.pooled`); the full-state oracle, the
+    decentralised controller and zero input (:mod:`baselines.references`)."""
     from baselines.policies import SeparationPolicy
+    from baselines.pooled import PooledKalmanPolicy, PooledLQGPolicy
     from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
 
+    return [cls(penv) for cls in (SeparationPolicy, PooledKalmanPolicy, PooledLQGPolicy, OraclePolicy,
+                                  DecentralizedPolicy, ZeroInputPolicy)]
+
+
+def _analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
     penv = parallel_factory(env, env_kwargs)()
-    out = {}
-    for label, pol in zip(ANALYTIC, (SeparationPolicy(penv), OraclePolicy(penv), DecentralizedPolicy(penv),
-                                     ZeroInputPolicy(penv))):
-        out[label] = _episode_payload(evaluate_policy(penv, pol, episodes, eval_seed, parallel=True))
+    out = {label: _episode_payload(evaluate_policy(penv, pol, episodes, eval_seed, parallel=True))
+           for label, pol in zip(ANALYTIC, _analytic_policies(penv))}
     penv.close()
     return out
 
@@ -439,7 +451,8 @@ def _interval(r: dict, value: str, prefix: str, fmt: str = ".3g") -> str:
 
 def _cells(r: dict) -> dict:
     """The table's cells of a row (shared by the text and the Markdown tables)."""
-    steps = "-" if r.get("env_steps") is None else f"{r['env_steps'] / 1000:g}k"
+    n = r.get("env_steps")
+    steps = "-" if n is None else (f"{n // 1000}k" if n >= 1000 and n % 1000 == 0 else str(n))
     secs = "-" if r.get("train_seconds_median") is None else f"{r['train_seconds_median']:.0f} s"
     return {"policy": r["policy"], "kind": r["kind"], "information": r["information"], "runs": str(r["runs"]),
             "steps": steps, "time": secs, "iqm": _interval(r, "cost_ratio_iqm", "cost_ratio"),

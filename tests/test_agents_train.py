@@ -135,3 +135,20 @@ def test_hyperparams_lookup_order():
     assert over["policy_kwargs"]["net_arch"] == [8] and over["policy_kwargs"]["activation_fn"] == "tanh"
     with pytest.raises(ValueError, match="algorithm"):
         load_hyperparams("a2c", "default")
+
+
+def test_training_leaves_nothing_in_the_temp_dir(tmp_path, monkeypatch):
+    """SB3's default logger makes an empty SB3-<date> directory in the temp dir for every run; the
+    runs log to stdout only (or to --tensorboard), so nothing is left behind."""
+    import tempfile
+
+    from agents.train import train
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    train("tracking", "ppo", timesteps=64, seed=0, out=str(tmp_path / "run"), progress=False,
+          hyperparams={"n_envs": 1, "n_steps": 64, "batch_size": 32, "n_epochs": 1}, env_kwargs={"max_cycles": 20},
+          checkpoint_freq=0)
+    assert os.path.isfile(tmp_path / "run" / "model.zip")
+    assert list(tmp.iterdir()) == []
