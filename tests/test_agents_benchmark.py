@@ -137,10 +137,15 @@ def test_markdown_table_has_every_policy_and_the_overlaps(tiny_run):
     md = open(os.path.join(out, "tracking", "results.md")).read().splitlines()
     rows = [line for line in md if line.startswith("| ") and not line.startswith("| policy")]
     assert [r.split(" | ")[0][2:] for r in rows] == [r["policy"] for r in doc["results"]]
-    paper = next(r for r in rows if r.startswith("| paper (separation) |"))
-    assert paper.split(" | ")[3] == "1"  # the unit, deterministic: no interval
+    header = md[0].strip("| ").split(" | ")
+    paper = dict(zip(header, next(r for r in rows if r.startswith("| paper (separation) |")).strip("| ").split(" | ")))
+    # the unit, deterministic (no interval), ties with itself on every episode, no training budget
+    assert paper["J / J_paper: IQM over runs [95% CI]"] == "1" and paper["P(J < J_paper) [95% CI]"] == "0.50"
+    assert paper["env steps per run"] == "-" and paper["information"] == "own observer's estimate"
+    ppo = dict(zip(header, next(r for r in rows if r.startswith("| PPO (centralised) |")).strip("| ").split(" | ")))
+    assert ppo["env steps per run"] == str(TINY["agents"]["ppo"]) and "[" in ppo["P(J < J_paper) [95% CI]"]
     overlaps = md[-1]
-    assert overlaps.startswith("Overlapping 95% CIs of J / J_paper: ")
+    assert overlaps.startswith("Overlapping 95% CIs of the IQM of J / J_paper: ")
     for a, b in doc["ci_overlaps"]:
         assert f"{a} / {b}" in overlaps
 
