@@ -534,7 +534,7 @@ def _plot_curves(curves: dict, path: str, title: str) -> None:
     ax.axhline(1.0, color="k", lw=1, ls="--", label="paper controller")
     ax.set_yscale("log")
     ax.set_xlabel("environment steps")
-    ax.set_ylabel(r"$J / J_{paper}$ (IQM, 95% CI over seeds)")
+    ax.set_ylabel(r"$J / J_{paper}$ (IQM, 95% CI over runs)")
     ax.set_title(title)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
@@ -588,7 +588,7 @@ def _plot_summary(per_env: dict, path: str, title: str) -> None:
         ax.set_xlabel(r"$J / J_{paper}$ (IQM, 95% CI)")
         ax.set_title(env)
         ax.grid(alpha=0.3, axis="x")
-    fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI over training seeds; "
+    fig.suptitle(f"{title}\n(< 1: cheaper than the paper's controller; bars: 95% CI, whole training runs resampled; "
                  f"> {SUMMARY_XMAX:g}: arrow at the edge)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

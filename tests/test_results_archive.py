@@ -1,5 +1,6 @@
-"""The stored full-budget run records (``results/hetero_mas_full_runs.tar.gz``) still answer today's
-benchmark: the README's command on them trains nothing and regenerates the README's table."""
+"""The stored run records behind the README's tables (``results/*.tar.gz``) still answer today's
+benchmark: the README's command on them trains nothing and gives the README's tables, number by
+number (:mod:`readme_tables`)."""
 from __future__ import annotations
 
 import os
@@ -11,50 +12,64 @@ from agents.benchmark import pending_runs, plan_runs
 from readme_tables import check_readme_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-ARCHIVE = os.path.join(ROOT, "results", "hetero_mas_full_runs.tar.gz")
+ARCHIVES = {
+    # archive -> (env argument, budget, runs, {env: README heading of its table})
+    "hetero_mas_full_runs.tar.gz": ("hetero_mas", "full", 80,
+                                    {"hetero_mas": "### RL versus the paper's controller (full budget, hetero_mas)"}),
+    "quick_all_runs.tar.gz": ("all", "quick", 48,
+                              {e: f"#### {e} (quick budget)" for e in
+                               ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}),
+}
 
 
-@pytest.fixture(scope="module")
-def extracted(tmp_path_factory):
-    out = tmp_path_factory.mktemp("full")
-    with tarfile.open(ARCHIVE) as tf:
+@pytest.fixture(scope="module", params=sorted(ARCHIVES))
+def extracted(request, tmp_path_factory):
+    name = request.param
+    env, budget, _, _ = ARCHIVES[name]
+    out = tmp_path_factory.mktemp(name.split(".")[0])
+    with tarfile.open(os.path.join(ROOT, "results", name)) as tf:
         names = tf.getnames()
-        prefix = ["models", "hetero_mas", "full"]
-        assert all(n.split("/")[:3] == prefix[:len(n.split("/"))] for n in names)
+        assert all(n.split("/")[0] == "models" and (len(n.split("/")) < 3 or n.split("/")[2] == budget) for n in names)
         assert not any(n.endswith((".zip", ".pkl")) for n in names)  # records only: no pickles
         tf.extractall(out, filter="data")
-    return str(out)
+    return name, str(out)
 
 
 def test_every_stored_run_is_reused_with_todays_recipes(extracted):
-    """A recipe edit that changes a full-budget agent's training makes its stored runs stale: the
-    README's hetero_mas table would then no longer be what the command gives (retrain, re-archive)."""
-    plan = plan_runs("hetero_mas", "full", extracted)
-    assert len(plan.specs) == 80
-    assert [(sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
+    """A recipe edit that changes an agent's training makes its stored runs stale: the README's tables
+    would then no longer be what the command gives (retrain, re-archive)."""
+    name, out = extracted
+    env, budget, runs, _ = ARCHIVES[name]
+    plan = plan_runs(env, budget, out)
+    assert len(plan.specs) == runs
+    assert [(sp["env"], sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
 
 
-def test_the_readme_table_is_what_the_stored_runs_give(extracted):
-    """``dobs-envs benchmark --env hetero_mas --budget full --out <extracted>`` (no training: every run
-    is stored) gives the table printed in the README: the analytic controllers are evaluated again on
-    the same seeded episodes, the statistics recomputed from the stored per-episode costs. Numbers are
-    compared, each with a tolerance suited to its quantity (:mod:`tests.readme_tables`)."""
+def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
+    """The README's command on the stored records (no training: every run is stored) gives the tables
+    printed in the README: the analytic controllers are evaluated again on the same seeded episodes,
+    the statistics recomputed from the stored per-episode costs; numbers are compared, each with a
+    tolerance suited to its quantity."""
     from agents.benchmark import run_benchmark
 
-    assert pending_runs(plan_runs("hetero_mas", "full", extracted)) == []  # or this would train for hours
-    run_benchmark("hetero_mas", "full", extracted, workers=1, progress=False)
-    check_readme_table("### RL versus the paper's controller (full budget, hetero_mas)",
-                       os.path.join(extracted, "hetero_mas", "results.json"))
+    name, out = extracted
+    env, budget, _, headings = ARCHIVES[name]
+    assert pending_runs(plan_runs(env, budget, out)) == []  # or this would train for hours
+    run_benchmark(env, budget, out, workers=1, progress=False)
+    for e, heading in headings.items():
+        check_readme_table(heading, os.path.join(out, e, "results.json"))
 
 
 def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
-    """The archive keeps no models: evaluating on other episodes means training again, which would
+    """The archives keep no models: evaluating on other episodes means training again, which would
     replace the stored records, so the benchmark refuses unless told to overwrite."""
     from agents.benchmark import RunConflictError, reevaluated_runs, replaced_runs, run_benchmark
 
-    plan = plan_runs("hetero_mas", "full", extracted, episodes=5)
+    name, out = extracted
+    env, budget, runs, _ = ARCHIVES[name]
+    plan = plan_runs(env, budget, out, episodes=5)
     todo = pending_runs(plan)
-    assert len(todo) == 80 and len(replaced_runs(todo)) == 80 and reevaluated_runs(plan) == []
-    with pytest.raises(RunConflictError, match="80 finished run"):
-        run_benchmark("hetero_mas", "full", extracted, episodes=5, workers=1, progress=False)
-    assert pending_runs(plan_runs("hetero_mas", "full", extracted)) == []  # nothing was touched
+    assert len(todo) == runs and len(replaced_runs(todo)) == runs and reevaluated_runs(plan) == []
+    with pytest.raises(RunConflictError, match=f"{runs} finished run"):
+        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False)
+    assert pending_runs(plan_runs(env, budget, out)) == []  # nothing was touched
