@@ -72,7 +72,8 @@ def add_parser(sub) -> None:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--overwrite", action="store_true",
                    help="retrain runs whose directory holds a finished run of another configuration or recipe "
-                        "(removes those runs); without it the benchmark refuses to replace them")
+                        "(removes those runs), and write into an --out that holds files the benchmark did not write "
+                        "(agents.benchmark.foreign_entries); without it the benchmark refuses both")
     p.add_argument("--dry-run", action="store_true",
                    help="list the runs that would train, the kept models that would be evaluated again and the "
                         "stored results that are reused; train nothing")
@@ -166,8 +167,7 @@ def _train(args) -> int:
     if os.path.exists(out) and not os.path.isdir(out):
         _usage_error(f"--out {out!r} is a file, not a directory")
     if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
-        _usage_error(f"--out {out!r} already holds a run; pass --overwrite to replace it, --resume {out} to continue "
-                     f"an interrupted run, or choose another --out")
+        _usage_error(_occupied_run_dir(out))
     try:
         res = train(env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
                     out=out, tensorboard=args.tensorboard, progress=not args.no_progress,
@@ -184,6 +184,31 @@ def _train(args) -> int:
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
+
+
+def _occupied_run_dir(out: str) -> str:
+    """Why ``train --out`` refuses the non-empty directory ``out``: a run (its status, resumable or not)
+    or other files (named), and the ways out."""
+    from .train import RunDirError, read_run_config, resume_point
+
+    if os.path.isfile(os.path.join(out, "config.json")):
+        try:
+            cfg = read_run_config(out, require_model=False)
+        except RunDirError:
+            cfg = None
+        if cfg is not None:
+            what = f"a {cfg.get('status', 'training')} {cfg['algo']} run on {cfg['env']}"
+            try:
+                resume_point(out, cfg)
+                hint = f", --resume {out} to continue it"
+            except (RunDirError, OSError):
+                hint = ""
+            return f"--out {out!r} already holds {what}; pass --overwrite to replace it{hint}, or choose another --out"
+    entries = sorted(os.listdir(out))
+    shown = ", ".join(entries[:5]) + (f" and {len(entries) - 5} more" if len(entries) > 5 else "")
+    return (f"--out {out!r} is not empty and holds no run ({len(entries)} entr{'y' if len(entries) == 1 else 'ies'}: "
+            f"{shown}); choose another --out, or pass --overwrite to train into it (a run's files are replaced, "
+            f"other files are kept)")
 
 
 def _resume(args) -> int:
@@ -236,6 +261,8 @@ def _evaluate(args) -> int:
 
     if args.json:
         d = os.path.dirname(os.path.abspath(args.json))
+        if os.path.isdir(args.json):
+            _usage_error(f"--json {args.json!r} is a directory; give a file name, e.g. {os.path.join(args.json, 'eval.json')}")
         if not os.path.isdir(d):
             _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
     try:
@@ -252,9 +279,14 @@ def _evaluate(args) -> int:
 
 
 def _benchmark(args) -> int:
-    from .benchmark import RunConflictError, plan_runs, run_benchmark
+    from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
     t0 = time.perf_counter()
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        _usage_error(f"--out {args.out!r} is a file, not a directory")
+    foreign = foreign_entries(args.out)
+    if foreign and not args.overwrite:
+        _usage_error(f"--out {OutDirError(args.out, foreign)}")
     agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
     try:  # the arguments argparse cannot check (the agent names), as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
@@ -267,6 +299,8 @@ def _benchmark(args) -> int:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
                              workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite)
+    except OutDirError as exc:  # the directory changed since the check above
+        _usage_error(f"--out {exc}")
     except RunConflictError as exc:
         _usage_error(f"--out {args.out!r}: {len(exc.paths)} finished run(s) were made with another configuration "
                      f"or recipe (first: {exc.paths[0]}); pass --overwrite to retrain them or choose another --out")

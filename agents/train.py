@@ -627,6 +627,12 @@ class RunDirError(ValueError):
     """A run directory that is missing, incomplete or corrupt."""
 
 
+def _first_line(exc: BaseException, limit: int = 200) -> str:
+    """The first line of ``exc``'s message, at most ``limit`` characters (for one-line errors)."""
+    text = (str(exc).strip().splitlines() or [""])[0]
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 @dataclass(frozen=True)
 class RunFiles:
     """The files of a saved agent: its run directory, ``config.json``, the model (``model.zip`` or a
@@ -726,12 +732,22 @@ class TrainedAgent:
         self.model_path = files.model
         self.algo = self.config["algo"]
         self.multi_agent = bool(self.config["multi_agent"])
-        self.model = _algo_class(self.algo).load(files.model, device=device)
+        try:
+            self.model = _algo_class(self.algo).load(files.model, device=device)
+        except Exception as exc:  # noqa: BLE001 -- a damaged file fails anywhere in zipfile/torch/pickle
+            raise RunDirError(f"{files.model} cannot be loaded as a {self.algo} model (corrupt or truncated "
+                              f"file? {type(exc).__name__}: {_first_line(exc)})") from exc
         vn = files.vecnormalize
         self.vecnorm = None
         if vn is not None:
-            with open(vn, "rb") as fh:
-                self.vecnorm = pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+            try:
+                with open(vn, "rb") as fh:
+                    self.vecnorm = pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+            except Exception as exc:  # noqa: BLE001 -- a damaged pickle raises almost anything
+                raise RunDirError(f"{vn} cannot be loaded (corrupt or truncated file? {type(exc).__name__}: "
+                                  f"{_first_line(exc)})") from exc
+            if not hasattr(self.vecnorm, "normalize_obs"):
+                raise RunDirError(f"{vn} holds a {type(self.vecnorm).__name__}, not the run's VecNormalize")
             self.vecnorm.training = False
             self.vecnorm.norm_reward = False
 

@@ -36,7 +36,7 @@ import numpy as np
 
 from .graphs import Graph, as_graph
 from .linalg.subspaces import STABILITY_TOL, orth, orth_complement, rank_tol, stable_mask, subspace_sum
-from .linalg.validation import as_matrix, as_square
+from .linalg.validation import as_array, as_int, as_matrix, as_square, check_tol
 
 __all__ = [
     "AssumptionError",
@@ -433,14 +433,21 @@ def check_collective_detectability(T_d_list: Sequence, n: int, *, tol: float | N
 
     Raises
     ------
+    ValueError
+        ``n`` not an integer >= 1, ``tol`` not None or positive, ``T_d_list`` not a sequence,
+        a basis with NaN/inf/complex entries or of the wrong shape (the message names it).
     CollectiveDetectabilityError
         With ``dimension`` of the sum and ``missing_directions`` (orthonormal
         basis of its orthogonal complement).
     """
-    n = int(n)
+    n = as_int(n, "n (the state dimension)", minimum=1)
+    tol = check_tol(tol)
+    if isinstance(T_d_list, np.ndarray) or not isinstance(T_d_list, Sequence):
+        raise ValueError(f"T_d_list must be a sequence (list or tuple) of (n, delta_i) bases, one per node, "
+                         f"got {type(T_d_list).__name__}")
     mats = []
     for i, T in enumerate(T_d_list):
-        T = np.asarray(T, dtype=float)
+        T = as_array(T, f"T_d_list[{i}]")  # refuses NaN/inf and complex entries (never cast)
         if T.ndim == 1 and T.shape[0] == n:
             T = T.reshape(n, 1)
         if T.ndim != 2 or T.shape[0] != n:

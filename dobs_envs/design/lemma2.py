@@ -62,7 +62,7 @@ from ..linalg.subspaces import (
     rank_tol,
     scaled_rank,
 )
-from ..linalg.validation import as_matrix, as_square
+from ..linalg.validation import as_matrix, as_square, check_tol
 
 __all__ = [
     "StrongDetectability",
@@ -362,7 +362,8 @@ def strong_detectability(
         Absolute singular-value threshold for every rank decision. It is
         applied to the internally normalised data (``A / ||A||_2``, orthonormal
         bases of ``Im B_unknown`` and of the row space of ``C``), so it is
-        unit-free. Default: :func:`~dobs_envs.linalg.subspaces.rank_tol`.
+        unit-free. ``None`` (default: :func:`~dobs_envs.linalg.subspaces.rank_tol`)
+        or a positive finite number; anything else is a ``ValueError`` naming ``tol``.
     margin : float, optional
         Requested stability margin of the assignable part of ``E`` (in the time
         unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
@@ -502,6 +503,7 @@ def strong_detectability(
        (:func:`_stabilising_injection`).
     """
     A0, B0, C0 = _validate(A, B_unknown, C)
+    tol = check_tol(tol)  # before any rank decision: a bad tol is the caller's, not the system's scaling
     n = A0.shape[0]
     p = C0.shape[0]
     try:

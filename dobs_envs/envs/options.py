@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ..linalg.validation import NUMERIC_KINDS
+from ..linalg.validation import NUMERIC_KINDS, as_flag
 
 __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
 
@@ -93,10 +93,11 @@ class EnvOptions:
         ``j >= m_k`` are ignored. The centralised views (``gym.make``, ``gym.make_vec``) then
         take ``Box(-1, 1, (m,))`` (all inputs stacked, each scaled by its bound; no padding).
     padded_observations : bool
-        Every agent observes ``2 W`` values (``W`` the widest agent observation): its own
-        observation zero-padded to ``W``, then a 0/1 mask of ``W`` entries (1 = real entry;
-        component ``"obs_mask"`` of ``observation_layout``), with the same bounds for every
-        agent. With ``normalized_actions`` every agent has identical spaces: one shared policy
+        Identical observation spaces: where the agents' widths differ, every agent observes ``2 W``
+        values (``W`` the widest agent observation): its own observation zero-padded to ``W``, then
+        a 0/1 mask of ``W`` entries (1 = real entry; component ``"obs_mask"`` of
+        ``observation_layout``); where every agent already has width ``W``, its observation as it
+        is (no padding, no mask). Either way the same bounds for every agent (the union). With ``normalized_actions`` every agent has identical spaces: one shared policy
         (parameter sharing in SuperSuit, RLlib, BenchMARL, TorchRL) needs no wrapper.
     """
 
@@ -210,7 +211,7 @@ class EnvOptions:
             raise ValueError(f"state_bound must be a positive number <= 1e150 (its square enters the termination "
                              f"penalty), got {sb!r}")
         set_("state_bound", float(sb))
-        set_("termination_penalty", bool(self.termination_penalty))
+        set_("termination_penalty", as_flag(self.termination_penalty, "termination_penalty"))  # "no" is not True
         if self.reward not in REWARDS:
             raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
         cs = self.cost_scale
@@ -226,9 +227,7 @@ class EnvOptions:
             raise ValueError(f"disturbance_amplitude must be finite and >= 0, got {amp!r}")
         set_("disturbance_amplitude", float(amp))
         for name in ("normalized_actions", "padded_observations"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-            set_(name, bool(getattr(self, name)))
+            set_(name, as_flag(getattr(self, name), name))
 
 
 @dataclass(frozen=True, eq=False)

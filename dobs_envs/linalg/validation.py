@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_array", "as_matrix", "as_square", "as_symmetric", "as_numeric", "check_tol", "NUMERIC_KINDS"]
+__all__ = ["as_array", "as_matrix", "as_square", "as_symmetric", "as_numeric", "check_tol", "as_int", "check_seed",
+           "as_flag", "NUMERIC_KINDS"]
 
 #: Relative tolerance of :func:`as_symmetric`: ``max |M - M^T| <= SYM_RTOL * max(1, max |M|)``.
 SYM_RTOL = 1e-10
@@ -183,6 +184,8 @@ def check_tol(tol, name: str = "tol") -> float | None:
     """``None`` or a positive finite float (an absolute SVD threshold)."""
     if tol is None:
         return None
+    if isinstance(tol, (bool, np.bool_)):
+        raise ValueError(f"{name} must be None or a positive finite float, got {tol!r}")
     try:
         t = float(tol)
     except (TypeError, ValueError):
@@ -190,3 +193,51 @@ def check_tol(tol, name: str = "tol") -> float | None:
     if not np.isfinite(t) or t <= 0:
         raise ValueError(f"{name} must be None or a positive finite float, got {tol!r}")
     return t
+
+
+def as_int(value, name: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    """``value`` as a Python ``int`` (sizes, node/channel indices, counts).
+
+    Accepted: ``int``, numpy integers, and floats with an integral value (``3.0``, as YAML/JSON
+    may give). Refused with a ``ValueError`` naming ``name``: ``bool`` (``True`` is not the
+    index 1), fractional or non-finite floats (never truncated), complex numbers, strings and
+    anything else; values outside ``[minimum, maximum]``.
+    """
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be an integer, got the boolean {value!r}")
+    if isinstance(value, (int, np.integer)):
+        v = int(value)
+    elif isinstance(value, (float, np.floating)):
+        if not np.isfinite(value):
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+        if float(value) != int(value):
+            raise ValueError(f"{name} must be an integer, got {value!r} (fractional values are not truncated)")
+        v = int(value)
+    else:
+        raise ValueError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
+    if minimum is not None and v < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{name} must be an integer <= {maximum}, got {v}")
+    return v
+
+
+def check_seed(seed, name: str = "seed") -> int | None:
+    """``None`` or a non-negative integer seed (``numpy.random.default_rng``'s domain): ``int`` or a numpy
+    integer; ``bool`` and floats (even ``1.0``, as Gymnasium's own seeding) are refused with a
+    ``ValueError`` naming ``name``."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"{name} must be None or a non-negative integer, got {type(seed).__name__} {seed!r}")
+    if seed < 0:
+        raise ValueError(f"{name} must be None or a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def as_flag(value, name: str) -> bool:
+    """``True`` or ``False`` (also numpy's bool): an option that is a switch. Anything else (``"no"``,
+    ``0``, ``None``) is refused with a ``ValueError`` naming ``name``, not cast by truthiness."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
