@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
     p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
                    help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
                         "by behaviour cloning of the paper's controller (centralised PPO)")
-    p.add_argument("--seed", type=int, default=None, help="training seed (default 0)")
+    p.add_argument("--seed", type=_seed, default=None, help="training seed (default 0)")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
@@ -49,7 +49,7 @@ def add_parser(sub) -> None:
     p.add_argument("--model", required=True,
                    help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip)")
     p.add_argument("--episodes", type=_positive_int, default=10)
-    p.add_argument("--seed", type=int, default=10_000, help="episode k is reset with seed + k")
+    p.add_argument("--seed", type=_seed, default=10_000, help="episode k is reset with seed + k")
     p.add_argument("--json", default=None, help="also write the summary to this file")
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept a run whose config.json names 'package.module:factory' (imports that code; "
@@ -61,11 +61,11 @@ def add_parser(sub) -> None:
     p.add_argument("--env", default="tracking", choices=sorted(ENVS) + ["all"])
     p.add_argument("--budget", choices=sorted(BUDGETS), default="quick")
     p.add_argument("--out", default="runs/benchmark")
-    p.add_argument("--seed", type=int, default=0, help="first training seed (seeds seed, seed+1, ...)")
+    p.add_argument("--seed", type=_seed, default=0, help="first training seed (seeds seed, seed+1, ...)")
     p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="parallel training processes (default: the number of CPU cores)")
-    p.add_argument("--eval-seed", type=int, default=10_000, help="episode k of every policy is reset with eval_seed + k")
+    p.add_argument("--eval-seed", type=_seed, default=10_000, help="episode k of every policy is reset with eval_seed + k")
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
@@ -87,9 +87,14 @@ def _usage_error(msg: str) -> None:
 
 
 def _json_object(text: str) -> dict:
+    def no_constant(name):
+        raise ValueError(f"{name} is not a number JSON allows")
+
     try:
-        v = json.loads(text)
-    except json.JSONDecodeError as exc:
+        v = json.loads(text, parse_constant=no_constant)
+    except ValueError as exc:
+        if not isinstance(exc, json.JSONDecodeError):
+            raise argparse.ArgumentTypeError(f"not valid JSON ({exc}): {text!r}") from None
         raise argparse.ArgumentTypeError(f"not valid JSON ({exc.msg} at column {exc.colno}): {text!r}") from None
     if not isinstance(v, dict):
         raise argparse.ArgumentTypeError(f"expected a JSON object of hyperparameters, got {text!r}")
@@ -113,6 +118,7 @@ def _int_at_least(lo: int, what: str):
 
 _nonnegative_int = _int_at_least(0, "an integer >= 0")
 _positive_int = _int_at_least(1, "a positive integer")
+_seed = _int_at_least(0, "a seed: an integer >= 0")
 
 
 #: the options that define a run (argparse dest, option, config.json key); --resume checks them
@@ -158,6 +164,9 @@ def _train(args) -> int:
     args.algo = args.algo or "ppo"
     args.seed = 0 if args.seed is None else args.seed
     args.multi_agent = bool(args.multi_agent)
+    if args.env is not None and not args.env.strip():
+        _usage_error("--env '': expected an env name (tracking, disturbance_rejection, hetero_mas, random_network) "
+                     "or a Gymnasium id")
     try:
         env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
                              what="--env")
@@ -282,13 +291,19 @@ def _benchmark(args) -> int:
     from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
     t0 = time.perf_counter()
+    agents = None
+    if args.agents is not None:
+        agents = [a.strip() for a in args.agents.split(",")]
+        unknown = [a for a in agents if a not in AGENTS]
+        if not args.agents.strip() or unknown:
+            _usage_error(f"--agents {args.agents!r}: expected a comma-separated subset of {','.join(AGENTS)}"
+                         + (f" (unknown: {', '.join(repr(a) for a in unknown)})" if unknown and args.agents.strip() else ""))
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         _usage_error(f"--out {args.out!r} is a file, not a directory")
     foreign = foreign_entries(args.out)
     if foreign and not args.overwrite:
         _usage_error(f"--out {OutDirError(args.out, foreign)}")
-    agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
-    try:  # the arguments argparse cannot check (the agent names), as a usage error
+    try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                          episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds)
     except ValueError as exc:

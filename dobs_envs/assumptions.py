@@ -36,7 +36,7 @@ import numpy as np
 
 from .graphs import Graph, as_graph
 from .linalg.subspaces import STABILITY_TOL, orth, orth_complement, rank_tol, stable_mask, subspace_sum
-from .linalg.validation import as_array, as_int, as_matrix, as_square, check_tol
+from .linalg.validation import as_array, as_float, as_int, as_matrix, as_square, check_tol
 
 __all__ = [
     "AssumptionError",
@@ -307,6 +307,7 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
     A = as_square(A)
     n = A.shape[0]
     B = as_matrix(B, "B", rows=n, vector_as="col")
+    margin, tol = as_float(margin, "margin", minimum=0.0), check_tol(tol)
     ev = uncontrollable_eigenvalues(A, B, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -333,6 +334,7 @@ def check_detectable(A, C, *, margin: float = 0.0, tol: float | None = None, nam
     A = as_square(A)
     n = A.shape[0]
     C = as_matrix(C, "C", cols=n)
+    margin, tol = as_float(margin, "margin", minimum=0.0), check_tol(tol)
     ev = uncontrollable_eigenvalues(A.T, C.T, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -368,6 +370,7 @@ def check_matching(B, B_v, *, rtol: float = MATCHING_RTOL) -> np.ndarray:
     MatchingConditionError
         With the residual and an orthonormal basis of the unmatched directions.
     """
+    rtol = as_float(rtol, "rtol", positive=True)
     B = as_matrix(B, "B")
     n, m = B.shape
     B_v = as_matrix(B_v, "B_v", rows=n, vector_as="col")
@@ -490,6 +493,7 @@ def check_exosystem_bounded(S, *, axis_rtol: float = EXO_AXIS_RTOL) -> None:
     UnboundedExosystemError
     """
     S = as_square(S, "S")
+    axis_rtol = as_float(axis_rtol, "axis_rtol", positive=True)
     k = S.shape[0]
     if k == 0:
         return

@@ -62,7 +62,7 @@ from ..linalg.subspaces import (
     rank_tol,
     scaled_rank,
 )
-from ..linalg.validation import as_matrix, as_square, check_tol
+from ..linalg.validation import as_float, as_matrix, as_square, check_tol
 
 __all__ = [
     "StrongDetectability",
@@ -506,13 +506,7 @@ def strong_detectability(
     tol = check_tol(tol)  # before any rank decision: a bad tol is the caller's, not the system's scaling
     n = A0.shape[0]
     p = C0.shape[0]
-    try:
-        margin_f = float(margin)
-    except (TypeError, ValueError):
-        margin_f = float("nan")
-    if isinstance(margin, (bool, np.bool_)) or not (np.isfinite(margin_f) and margin_f > 0):
-        raise ValueError(f"margin must be a positive finite number, got {margin!r}")
-    margin = margin_f
+    margin = as_float(margin, "margin", positive=True)
 
     # ---- exact scaling (implementation choice 4) -----------------------------
     # powers of two: A = 2^ka A1, every column of B and every row of C scaled to entries of
