@@ -304,10 +304,11 @@ def _custom3() -> dict:
 
 
 #: Scenario fields and the class of bad value each is fed (matrices get bad_matrix of their shape)
-SCALAR_FIELDS = {"gamma0": bad_positive, "gamma_s0": bad_positive, "phi": bad_positive, "phi_s": bad_positive,
-                 "sigma": bad_nonnegative, "sigma_s": bad_nonnegative, "t_end": bad_positive, "dt": bad_positive,
-                 "epsilon": bad_positive, "beta0": bad_nonnegative, "sigma_beta": bad_nonnegative,
-                 "phi_beta": bad_positive, "mas_shift": bad_positive, "x0_scale": bad_positive}
+SCALAR_FIELDS = {"gamma0": bad_nonnegative, "gamma_s0": bad_nonnegative, "phi": bad_nonnegative,
+                 "phi_s": bad_nonnegative, "sigma": bad_nonnegative, "sigma_s": bad_nonnegative, "t_end": bad_positive,
+                 "dt": bad_positive, "epsilon": bad_positive, "beta0": bad_nonnegative, "sigma_beta": bad_nonnegative,
+                 "phi_beta": bad_nonnegative, "mas_shift": bad_nonnegative,
+                 "x0_scale": bad_nonnegative.filter(lambda v: v is not None)}  # None: no x0 distribution
 
 
 def _scenario_kwargs(d: dict) -> dict:

@@ -157,8 +157,8 @@ class EnvOptions:
             set_("max_cycles", as_int(mc, "max_cycles", minimum=1))
         if hz is not None:
             set_("horizon", as_float(hz, "horizon (seconds; math.inf: never truncate)", positive=True, allow_inf=True))
-        try:
-            dtype = np.dtype(self.obs_dtype)
+        try:  # np.dtype(None) is float64: None is refused, not taken as a default
+            dtype = np.dtype(self.obs_dtype) if self.obs_dtype is not None else None
         except TypeError:
             dtype = None
         if dtype not in (np.float32, np.float64):

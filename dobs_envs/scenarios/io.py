@@ -274,6 +274,23 @@ def _compose_mas(agents):
 
 
 _FLOAT_MAX = float(np.finfo(np.float64).max)
+#: keys whose values are text or free-form (not numbers)
+_TEXT_KEYS = ("metadata", "name", "description", "controller")
+
+
+#: a number written as YAML 1.2 / JSON would (PyYAML reads YAML 1.1, where ``1e-3`` without a dot is a string)
+_NUMBER = re.compile(r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?")
+
+
+def _numbers(v):
+    """``v`` with every string that spells a number (``"1e-3"``: YAML 1.1 reads it as a string) as a float."""
+    if isinstance(v, str):
+        return float(v) if _NUMBER.fullmatch(v.strip()) else v
+    if isinstance(v, Mapping):
+        return {k: _numbers(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_numbers(x) for x in v]
+    return v
 
 
 def _check_scalars(v, source: str, key: str) -> None:
@@ -304,8 +321,9 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     """
     d = _mapping(d, source, None)
     _reject_unknown(d, VALID_KEYS, source, None)
+    d = {k: v if k in _TEXT_KEYS else _numbers(v) for k, v in d.items()}
     for key, value in d.items():
-        if key not in ("metadata", "name", "description", "controller"):  # strings / free-form
+        if key not in _TEXT_KEYS:
             _check_scalars(value, source, key)
     kw: dict = {}
     agents = None
