@@ -295,9 +295,10 @@ def _benchmark(args) -> int:
     if args.agents is not None:
         agents = [a.strip() for a in args.agents.split(",")]
         unknown = [a for a in agents if a not in AGENTS]
-        if not args.agents.strip() or unknown:
-            _usage_error(f"--agents {args.agents!r}: expected a comma-separated subset of {','.join(AGENTS)}"
-                         + (f" (unknown: {', '.join(repr(a) for a in unknown)})" if unknown and args.agents.strip() else ""))
+        if not args.agents.strip():
+            _usage_error(f"--agents '': expected a comma-separated subset of {','.join(AGENTS)}")
+        if unknown:
+            _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}")
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         _usage_error(f"--out {args.out!r} is a file, not a directory")
     foreign = foreign_entries(args.out)

@@ -19,7 +19,8 @@ Entry points covered (``ENTRY_POINTS`` below lists them for the report):
   ``check_matching``, ``check_exosystem_bounded``;
 - graphs: ``Graph``, ``Graph.from_edges``, ``Graph.neighbors``, ``path_graph``, ``ring_graph``,
   ``star_graph``, ``complete_graph``, ``random_connected_graph``;
-- scenarios: ``Scenario(...)``, ``scenario_from_dict``, ``load_scenario`` (YAML and JSON files);
+- scenarios: ``Scenario(...)``, ``scenario_from_dict``, ``load_scenario`` (YAML and JSON files),
+  ``random_plant_scenario``, ``random_mas_scenario``, ``rendezvous_scenario``, ``Sinusoids``;
 - environments: every registered env through ``<module>.parallel_env``, ``<module>.env``,
   ``gym.make``, ``gym.make_vec`` and ``EnvClass.make_core`` (each option of ``EnvOptions`` and of
   the env's own options dataclass, unknown keywords), then ``reset(seed, options)`` and ``step``
@@ -67,7 +68,7 @@ ENTRY_POINTS = (
     "observer_are_gain", "check_collective_detectability", "check_stabilizable", "check_detectable",
     "check_matching", "check_exosystem_bounded", "Graph", "Graph.from_edges", "Graph.neighbors", "path_graph",
     "ring_graph", "star_graph", "complete_graph", "random_connected_graph", "Scenario", "scenario_from_dict",
-    "load_scenario", "<env>.parallel_env", "<env>.env", "gym.make", "gym.make_vec", "<EnvClass>.make_core",
+    "load_scenario", "random_plant_scenario", "random_mas_scenario", "rendezvous_scenario", "Sinusoids", "<env>.parallel_env", "<env>.env", "gym.make", "gym.make_vec", "<EnvClass>.make_core",
     "ParallelEnv.reset/step", "gym Env.reset/step", "VectorEnv.reset/step",
     "dobs-envs train", "dobs-envs evaluate", "dobs-envs benchmark", "dobs-envs reproduce",
 )
@@ -429,6 +430,39 @@ def test_scenario_from_dict(key, data):
     raises_named(ScenarioFileError, key, scenario_from_dict, d)
 
 
+@SETTINGS
+@given(data=st.data())
+def test_scenario_generators_and_signals(data):
+    """random_plant_scenario, random_mas_scenario, rendezvous_scenario, Sinusoids."""
+    from dobs_envs.scenarios.mas_tasks import rendezvous_scenario
+    from dobs_envs.scenarios.random import MAX_SIZE, random_mas_scenario, random_plant_scenario
+    from dobs_envs.scenarios.signals import Sinusoids
+
+    huge_size = st.sampled_from([MAX_SIZE + 1, TOO_LARGE])
+    case = data.draw(st.sampled_from(["n_states", "n_controllers", "n_observers", "seed", "edge_prob", "n_agents",
+                                      "mas_seed", "q_rest", "r", "rho", "amplitude", "frequency", "phase"]))
+    if case in ("n_states", "n_controllers", "n_observers"):
+        kw = {"n_states": 4, "n_controllers": 2, "n_observers": 2, "seed": 0}
+        kw[case] = data.draw(st.one_of(bad_positive_int, huge_size))
+        raises_named(ValueError, case, random_plant_scenario, **kw)
+    elif case in ("seed", "edge_prob"):
+        bad = data.draw(bad_seed if case == "seed" else st.one_of(bad_real, st.just(1.5)))
+        raises_named(ValueError, case, random_plant_scenario, 4, 2, 2, **{"seed": 0, case: bad})
+    elif case in ("n_agents", "mas_seed"):
+        kw = {"n_agents": 3, "seed": 0}
+        kw["n_agents" if case == "n_agents" else "seed"] = data.draw(
+            st.one_of(bad_positive_int, huge_size) if case == "n_agents" else bad_seed)
+        raises_named(ValueError, "n_agents" if case == "n_agents" else "seed", random_mas_scenario, **kw)
+    elif case in ("q_rest", "r", "rho"):
+        raises_named(ValueError, case, rendezvous_scenario, **{case: data.draw(bad_positive if case == "r"
+                                                                                 else bad_nonnegative)})
+    else:
+        kw = {"amplitude": 1.0, "frequency": 1.0, "phase": 0.0}
+        kw[case] = data.draw(st.one_of(bad_real.filter(lambda v: not isinstance(v, (dict, list))),
+                                       st.just([[1.0], [2.0, 3.0]]), st.just([1.0, True])))
+        raises_named(ValueError, case, Sinusoids, **kw)
+
+
 # ---------------------------------------------------------------------- environments
 ENTRIES = list(registry.ENVIRONMENTS.values())
 
@@ -618,3 +652,67 @@ def test_cli_usage_errors(tmp_path, cmd, opt, bad):
     assert opt in err.strip().splitlines()[-1], (argv, err)
     assert "Traceback" not in err
     assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+# ---------------------------------------------------------------------- issue 19, item 4: the reported cases
+def _yaml_with(tmp_path, old, new, name="s.yaml"):
+    text = open(example_path("custom3")).read()
+    assert old in text
+    f = tmp_path / name
+    f.write_text(text.replace(old, new, 1))
+    return f
+
+
+@pytest.mark.parametrize("case", ["nan_T", "complex_T", "negative_n"])
+def test_reported_collective_detectability(case):
+    T, n = {"nan_T": ([np.full((2, 1), NAN)], 2), "complex_T": ([np.eye(2) * (1 + 1j)], 2),
+            "negative_n": ([np.eye(2)], -2)}[case]
+    raises_named(ValueError, ["T_d_list[0]", "n (the state dimension)"], check_collective_detectability, T, n)
+
+
+@pytest.mark.parametrize("tol", [-1, NAN, 0.0, True, "1e-9"])
+def test_reported_strong_detectability_tol_is_blamed_not_the_scaling(tol):
+    err = raises_named(ValueError, "tol", strong_detectability, A2, B2, C2, tol=tol)
+    assert "scaled" not in str(err) and "rank" not in str(err)
+
+
+def test_reported_truncated_indices_and_seeds(tmp_path):
+    raises_named(ValueError, "node index", Graph.from_edges, 3, [(0, 1.5), (1, 2)])
+    raises_named(ValueError, "seed", random_connected_graph, 4, 0.3, 1.5)
+    f = _yaml_with(tmp_path, "edges: [[0, 1], [1, 2]]", "edges: [[0, 1.7], [1, 2]]")
+    raises_named(ScenarioFileError, "graph.edges", load_scenario, f)
+    f = _yaml_with(tmp_path, "  edges: [[0, 1], [1, 2]]\n  weights: [1.0, 2.0]", "  topology: random\n  seed: 2.5",
+                   "seed.yaml")
+    raises_named(ScenarioFileError, "seed", load_scenario, f)
+    from dobs_envs import tracking_v0
+
+    env = tracking_v0.parallel_env(max_cycles=3)
+    raises_named(ValueError, "seed", env.reset, seed=2.5)
+    raises_named(ValueError, "system_seed", __import__("dobs_envs.random_network_v0", fromlist=["x"]).parallel_env,
+                 system_seed=1.5)
+
+
+def test_reported_termination_penalty_and_reset_options():
+    from dobs_envs import tracking_v0
+
+    raises_named(ValueError, "termination_penalty", tracking_v0.parallel_env, termination_penalty="no")
+    env = tracking_v0.parallel_env(max_cycles=3)
+    raises_named(ValueError, "options", env.reset, seed=0, options=[1, 2])
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("name: custom3", "name: custom3\nname: other", "name"),                                  # duplicated key
+    ("  weights: [1.0, 2.0]", "  weights: [1.0, 2.0]\n  weights: [1.0, 3.0]", "weights"),     # ... nested
+    ("[ 0.0,  1.0,  0.0,  0.0]", "[ 0.0,  yes,  0.0,  0.0]", "A[0][1]"),                      # YAML boolean
+    ("x0: [1.0, 0.0, -1.0, 0.0]", "x0: [1.0, 0.0, -1.0, 1" + "0" * 400 + "]", "x0[3]"),      # too large
+    ("gamma0: 0.1", "gamma0: 1" + "0" * 400, "gamma0"),
+])
+def test_reported_yaml_cases_name_the_key(tmp_path, old, new, key):
+    err = raises_named(ScenarioFileError, key, load_scenario, _yaml_with(tmp_path, old, new))
+    assert err.key == key
+
+
+def test_yaml_numbers_written_without_a_dot_still_load(tmp_path):
+    """YAML 1.1 (PyYAML) reads ``1e-3`` as a string: the file layer takes it as the number it spells."""
+    sc = load_scenario(_yaml_with(tmp_path, "dt: 0.001", "dt: 1e-3"))
+    assert sc.dt == 1e-3

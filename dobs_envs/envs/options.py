@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..linalg.validation import NUMERIC_KINDS, as_flag, as_float, as_int, check_seed
-from ..scenarios.random import GRAPH_TOPOLOGIES
+from ..scenarios.random import GRAPH_TOPOLOGIES, MAX_SIZE
 
 __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
 
@@ -246,7 +246,7 @@ class RandomNetworkOptions(EnvOptions):
             raise ValueError("system_seed must be a non-negative integer (the system is reproducible), got None")
         set_("system_seed", check_seed(self.system_seed, "system_seed"))
         for name in ("n_states", "n_controllers", "n_observers", "n_agents"):
-            set_(name, as_int(getattr(self, name), name, minimum=1))
+            set_(name, as_int(getattr(self, name), name, minimum=1, maximum=MAX_SIZE))
         if isinstance(self.graph, str) and self.graph not in GRAPH_TOPOLOGIES:
             raise ValueError(f"graph must be one of {GRAPH_TOPOLOGIES} (or a Graph / adjacency matrix), got {self.graph!r}")
         if not isinstance(self.graph, str) and isinstance(self.graph, (bool, int, float, complex, np.number)):

@@ -98,7 +98,7 @@ def _check_range(r, name, *, integer=False, lo=None) -> tuple:
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a pair (low, high), got {r!r}") from None
     if integer:
-        a, b = as_int(a, f"{name}[0]"), as_int(b, f"{name}[1]")
+        a, b = as_int(a, f"{name}[0]", maximum=MAX_SIZE), as_int(b, f"{name}[1]", maximum=MAX_SIZE)
     else:
         a, b = as_float(a, f"{name}[0]"), as_float(b, f"{name}[1]")
     if a > b:
@@ -112,8 +112,14 @@ def _check_prob(p, name) -> float:
     return as_float(p, f"{name} (a probability)", minimum=0.0, maximum=1.0)
 
 
-def _count(v, name, minimum=1) -> int:
-    return as_int(v, name, minimum=minimum)
+#: largest size (states, agents, controller or observer nodes, block dimensions) the generators accept:
+#: the design costs O(N n^3) and the simulation holds B x N x n estimates, so larger systems are refused
+#: with a named error instead of running for hours or failing to allocate
+MAX_SIZE = 1000
+
+
+def _count(v, name, minimum=1, maximum: int | None = MAX_SIZE) -> int:
+    return as_int(v, name, minimum=minimum, maximum=maximum)
 
 
 def random_spectrum(rng: np.random.Generator, n: int, *, real_range=(-1.0, 0.5), imag_range=(0.2, 2.0),
@@ -232,7 +238,7 @@ def _verify(sc: Scenario) -> None:
 
 
 def _attempts(max_attempts) -> int:
-    return _count(max_attempts, "max_attempts")
+    return _count(max_attempts, "max_attempts", maximum=None)
 
 
 # ---------------------------------------------------------------------- MAS
