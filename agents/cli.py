@@ -252,7 +252,7 @@ def _resume(args) -> int:
     try:
         res = resume(run, progress=not args.no_progress, threads=args.threads, verbose=args.verbose,
                      tensorboard=args.tensorboard, allow_custom_env=args.allow_custom_env)
-    except EnvNameError as exc:
+    except (EnvNameError, RunDirError) as exc:
         _usage_error(f"--resume: {exc}")
     except KeyboardInterrupt as exc:
         _interrupted(run, exc)

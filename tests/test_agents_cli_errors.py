@@ -237,3 +237,18 @@ def test_train_out_with_unrelated_files_says_what_is_there(tmp_path, capsys):
 def test_train_out_with_a_complete_run_names_it(run_dir, capsys):
     err = _exit2(["train", "--out", run_dir, "--no-progress"], capsys)
     assert "complete ppo run on tracking" in err and "--overwrite" in err
+
+
+def test_resume_with_a_corrupt_model_is_a_usage_error(run_dir, tmp_path, capsys):
+    d = tmp_path / "r"
+    shutil.copytree(run_dir, d)
+    cfg = json.load(open(d / "config.json"))
+    shutil.rmtree(d / "checkpoints", ignore_errors=True)  # model.zip is then the only resume point
+    cfg.update(status="interrupted", sb3_timesteps=32, model_sb3_timesteps=32)  # as after Ctrl-C at 32 steps
+    json.dump(cfg, open(d / "config.json", "w"))
+    import zipfile
+
+    with zipfile.ZipFile(d / "model.zip", "w") as zf:  # a zip (resume_point skips non-zips), not a model
+        zf.writestr("data", "not SB3's data")
+    err = _exit2(["train", "--resume", str(d), "--no-progress"], capsys)
+    assert "--resume" in err and "model.zip" in err and "corrupt" in err
