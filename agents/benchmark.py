@@ -699,6 +699,117 @@ def reevaluated_runs(plan: BenchmarkPlan) -> list[dict]:
     return [sp for sp in plan.specs if _stored_model(sp) is not None]
 
 
+# ---------------------------------------------------------------------- what an --out directory may hold
+#: written into ``out`` by every benchmark run (before anything else): the directory is the benchmark's
+MARKER = ".dobs-envs-benchmark"
+#: files the benchmark writes at the top level of ``out`` and in ``out/<env>``
+_TOP_FILES = ("summary.json", "summary.png")
+_ENV_FILES = ("results.json", "results.md", "results.csv", "error_norms.png", "learning_curves.png")
+#: files a training run (``agents.train``) and the benchmark write in a run directory
+_RUN_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "result.json")
+
+
+class OutDirError(ValueError):
+    """``out`` holds entries the benchmark did not write (``entries``, paths relative to ``out``), or is a file."""
+
+    def __init__(self, out: str, entries: list[str], detail: str | None = None):
+        self.out, self.entries = out, list(entries)
+        shown = ", ".join(self.entries[:5]) + (f" and {len(self.entries) - 5} more" if len(self.entries) > 5 else "")
+        super().__init__(detail or f"{out!r} holds {len(self.entries)} entr{'y' if len(self.entries) == 1 else 'ies'} "
+                                   f"the benchmark did not write ({shown}); the benchmark would overwrite or delete "
+                                   f"files there: pass --overwrite (overwrite=True) or choose another out")
+
+
+def _run_dir_foreign(path: str, rel: str) -> list[str]:
+    """Entries of a run directory ``<out>/models/<env>/<budget>/<agent>/s<seed>`` no run writes."""
+    bad = []
+    for f in sorted(os.listdir(path)):
+        name = f[:-4] if f.endswith(".tmp") else f  # atomic writes leave <file>.tmp behind when killed
+        if name == "checkpoints" and os.path.isdir(os.path.join(path, f)):
+            continue
+        if name not in _RUN_FILES or not os.path.isfile(os.path.join(path, f)):
+            bad.append(f"{rel}/{f}")
+    return bad
+
+
+def _models_foreign(out: str) -> tuple[list[str], int]:
+    """``(entries of out/models outside the layout models/<env>/<budget>/<agent>/s<seed>/<run files>, runs)``."""
+    bad, runs = [], 0
+    root = os.path.join(out, "models")
+    levels = (set(ENVS), set(BUDGETS), set(AGENTS))
+    def walk(path: str, rel: str, depth: int) -> None:  # noqa: E306
+        nonlocal runs
+        for f in sorted(os.listdir(path)):
+            p, r = os.path.join(path, f), f"{rel}/{f}"
+            if not os.path.isdir(p):
+                bad.append(r)
+            elif depth < 3:
+                if f in levels[depth]:
+                    walk(p, r, depth + 1)
+                else:
+                    bad.append(r)
+            elif f.startswith("s") and f[1:].isdigit():
+                runs += os.path.isfile(os.path.join(p, "config.json"))
+                bad.extend(_run_dir_foreign(p, r))
+            else:
+                bad.append(r)
+    walk(root, "models", 0)
+    return bad, runs
+
+
+def foreign_entries(out: str) -> list[str]:
+    """The entries of ``out`` (paths relative to it) that the benchmark did not write; ``[]``: the
+    benchmark may write there. ``out`` missing or empty: ``[]``.
+
+    The rule. The benchmark writes ``out/{MARKER}`` first, then only the layout
+    ``models/<env>/<budget>/<agent>/s<seed>/`` (run files: config.json, model.zip,
+    vecnormalize.pkl, replay_buffer.pkl, curve.json, result.json, checkpoints/), ``<env>/results.{json,md,csv}``,
+    ``<env>/error_norms.png``, ``<env>/learning_curves.png``, ``summary.json`` and ``summary.png``
+    (``<env>``, ``<budget>``, ``<agent>``: the known names). An entry outside that layout is foreign.
+    The output files (``summary.*``, ``<env>/*``) are the benchmark's only when the marker is there,
+    or, in a directory of a benchmark older than the marker, when ``models/`` holds at least one run
+    of the layout (with its ``config.json``); without either, they are the user's (foreign).
+    """
+    if not os.path.isdir(out):
+        return []
+    top = sorted(os.listdir(out))
+    bad, runs = [], 0
+    if "models" in top:
+        if os.path.isdir(os.path.join(out, "models")):
+            bad, runs = _models_foreign(out)
+        else:
+            bad.append("models")
+    ours = MARKER in top or runs > 0
+    for f in top:
+        p = os.path.join(out, f)
+        if f in (MARKER, "models"):
+            continue
+        if f in _TOP_FILES and os.path.isfile(p) and ours:
+            continue
+        if f in ENVS and os.path.isdir(p) and ours:
+            bad.extend(f"{f}/{g}" for g in sorted(os.listdir(p))
+                       if g not in _ENV_FILES or not os.path.isfile(os.path.join(p, g)))
+            continue
+        bad.append(f)
+    return bad
+
+
+def claim_out_dir(out: str, *, overwrite: bool = False) -> None:
+    """Check ``out`` with :func:`foreign_entries` and write the marker: the benchmark's first write.
+
+    Raises :class:`OutDirError` when ``out`` is a file, or holds foreign entries and not ``overwrite``
+    (then nothing is written)."""
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise OutDirError(out, [], f"{out!r} is a file, not a directory")
+    bad = foreign_entries(out)
+    if bad and not overwrite:
+        raise OutDirError(out, bad)
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, MARKER), "w") as fh:
+        fh.write("written by `dobs-envs benchmark`: this directory holds its runs and results "
+                 "(agents.benchmark.foreign_entries)\n")
+
+
 def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
                   eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
                   agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
@@ -719,6 +830,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     t_start = time.perf_counter()
     P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
                   agents=agents, seeds=seeds, threads=threads)
+    claim_out_dir(out, overwrite=overwrite)  # refuses a directory holding files the benchmark did not write
     clash = replaced_runs(pending_runs(P))
     if clash and not overwrite:
         raise RunConflictError(out, [sp["path"] for sp in clash])

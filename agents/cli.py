@@ -28,7 +28,7 @@ def add_parser(sub) -> None:
     p.add_argument("--hybrid", choices=("residual", "bc"), default=None,
                    help="residual: learn a bounded correction of the paper's controller; bc: warm-start the actor "
                         "by behaviour cloning of the paper's controller (centralised PPO)")
-    p.add_argument("--seed", type=int, default=None, help=f"training seed (default 0; the {TRAINING})")
+    p.add_argument("--seed", type=_seed, default=None, help=f"training seed (default 0; the {TRAINING})")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>_<algo>[_ma]_s<seed>)")
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
     p.add_argument("--model", required=True,
                    help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip)")
     p.add_argument("--episodes", type=_positive_int, default=10)
-    p.add_argument("--seed", type=int, default=TUNING.start,
+    p.add_argument("--seed", type=_seed, default=TUNING.start,
                    help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "
                         f"model selection; the {EVALUATION} holds the benchmark's evaluation episodes)")
     p.add_argument("--json", default=None, help="also write the summary to this file")
@@ -64,11 +64,11 @@ def add_parser(sub) -> None:
     p.add_argument("--env", default="tracking", choices=sorted(ENVS) + ["all"])
     p.add_argument("--budget", choices=sorted(BUDGETS), default="quick")
     p.add_argument("--out", default="runs/benchmark")
-    p.add_argument("--seed", type=int, default=0, help="first training seed (seeds seed, seed+1, ...)")
+    p.add_argument("--seed", type=_seed, default=0, help="first training seed (seeds seed, seed+1, ...)")
     p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="parallel training processes (default: the number of CPU cores)")
-    p.add_argument("--eval-seed", type=int, default=EVALUATION.start,
+    p.add_argument("--eval-seed", type=_seed, default=EVALUATION.start,
                    help=f"episode k of every policy is reset with eval_seed + k (inside the {EVALUATION})")
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
@@ -76,7 +76,8 @@ def add_parser(sub) -> None:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--overwrite", action="store_true",
                    help="retrain runs whose directory holds a finished run of another configuration or recipe "
-                        "(removes those runs); without it the benchmark refuses to replace them")
+                        "(removes those runs), and write into an --out that holds files the benchmark did not write "
+                        "(agents.benchmark.foreign_entries); without it the benchmark refuses both")
     p.add_argument("--dry-run", action="store_true",
                    help="list the runs that would train, the kept models that would be evaluated again and the "
                         "stored results that are reused; train nothing")
@@ -90,9 +91,14 @@ def _usage_error(msg: str) -> None:
 
 
 def _json_object(text: str) -> dict:
+    def no_constant(name):
+        raise ValueError(f"{name} is not a number JSON allows")
+
     try:
-        v = json.loads(text)
-    except json.JSONDecodeError as exc:
+        v = json.loads(text, parse_constant=no_constant)
+    except ValueError as exc:
+        if not isinstance(exc, json.JSONDecodeError):
+            raise argparse.ArgumentTypeError(f"not valid JSON ({exc}): {text!r}") from None
         raise argparse.ArgumentTypeError(f"not valid JSON ({exc.msg} at column {exc.colno}): {text!r}") from None
     if not isinstance(v, dict):
         raise argparse.ArgumentTypeError(f"expected a JSON object of hyperparameters, got {text!r}")
@@ -116,6 +122,7 @@ def _int_at_least(lo: int, what: str):
 
 _nonnegative_int = _int_at_least(0, "an integer >= 0")
 _positive_int = _int_at_least(1, "a positive integer")
+_seed = _int_at_least(0, "a seed: an integer >= 0")
 
 
 #: the options that define a run (argparse dest, option, config.json key); --resume checks them
@@ -165,6 +172,9 @@ def _train(args) -> int:
     except ValueError as exc:
         _usage_error(str(exc))
     args.multi_agent = bool(args.multi_agent)
+    if args.env is not None and not args.env.strip():
+        _usage_error("--env '': expected an env name (tracking, disturbance_rejection, hetero_mas, random_network) "
+                     "or a Gymnasium id")
     try:
         env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
                              what="--env")
@@ -174,8 +184,7 @@ def _train(args) -> int:
     if os.path.exists(out) and not os.path.isdir(out):
         _usage_error(f"--out {out!r} is a file, not a directory")
     if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
-        _usage_error(f"--out {out!r} already holds a run; pass --overwrite to replace it, --resume {out} to continue "
-                     f"an interrupted run, or choose another --out")
+        _usage_error(_occupied_run_dir(out))
     try:
         res = train(env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
                     out=out, tensorboard=args.tensorboard, progress=not args.no_progress,
@@ -192,6 +201,31 @@ def _train(args) -> int:
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
+
+
+def _occupied_run_dir(out: str) -> str:
+    """Why ``train --out`` refuses the non-empty directory ``out``: a run (its status, resumable or not)
+    or other files (named), and the ways out."""
+    from .train import RunDirError, read_run_config, resume_point
+
+    if os.path.isfile(os.path.join(out, "config.json")):
+        try:
+            cfg = read_run_config(out, require_model=False)
+        except RunDirError:
+            cfg = None
+        if cfg is not None:
+            what = f"a {cfg.get('status', 'training')} {cfg['algo']} run on {cfg['env']}"
+            try:
+                resume_point(out, cfg)
+                hint = f", --resume {out} to continue it"
+            except (RunDirError, OSError):
+                hint = ""
+            return f"--out {out!r} already holds {what}; pass --overwrite to replace it{hint}, or choose another --out"
+    entries = sorted(os.listdir(out))
+    shown = ", ".join(entries[:5]) + (f" and {len(entries) - 5} more" if len(entries) > 5 else "")
+    return (f"--out {out!r} is not empty and holds no run ({len(entries)} entr{'y' if len(entries) == 1 else 'ies'}: "
+            f"{shown}); choose another --out, or pass --overwrite to train into it (a run's files are replaced, "
+            f"other files are kept)")
 
 
 def _resume(args) -> int:
@@ -226,7 +260,7 @@ def _resume(args) -> int:
     try:
         res = resume(run, progress=not args.no_progress, threads=args.threads, verbose=args.verbose,
                      tensorboard=args.tensorboard, allow_custom_env=args.allow_custom_env)
-    except EnvNameError as exc:
+    except (EnvNameError, RunDirError) as exc:
         _usage_error(f"--resume: {exc}")
     except KeyboardInterrupt as exc:
         _interrupted(run, exc)
@@ -244,6 +278,8 @@ def _evaluate(args) -> int:
 
     if args.json:
         d = os.path.dirname(os.path.abspath(args.json))
+        if os.path.isdir(args.json):
+            _usage_error(f"--json {args.json!r} is a directory; give a file name, e.g. {os.path.join(args.json, 'eval.json')}")
         if not os.path.isdir(d):
             _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
     try:
@@ -260,11 +296,23 @@ def _evaluate(args) -> int:
 
 
 def _benchmark(args) -> int:
-    from .benchmark import RunConflictError, plan_runs, run_benchmark
+    from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
     t0 = time.perf_counter()
-    agents = [a.strip() for a in args.agents.split(",")] if args.agents else None
-    try:  # the arguments argparse cannot check (the agent names), as a usage error
+    agents = None
+    if args.agents is not None:
+        agents = [a.strip() for a in args.agents.split(",")]
+        unknown = [a for a in agents if a not in AGENTS]
+        if not args.agents.strip():
+            _usage_error(f"--agents '': expected a comma-separated subset of {','.join(AGENTS)}")
+        if unknown:
+            _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}")
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        _usage_error(f"--out {args.out!r} is a file, not a directory")
+    foreign = foreign_entries(args.out)
+    if foreign and not args.overwrite:
+        _usage_error(f"--out {OutDirError(args.out, foreign)}")
+    try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                          episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds)
     except ValueError as exc:
@@ -275,6 +323,8 @@ def _benchmark(args) -> int:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
                              workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite)
+    except OutDirError as exc:  # the directory changed since the check above
+        _usage_error(f"--out {exc}")
     except RunConflictError as exc:
         _usage_error(f"--out {args.out!r}: {len(exc.paths)} finished run(s) were made with another configuration "
                      f"or recipe (first: {exc.paths[0]}); pass --overwrite to retrain them or choose another --out")

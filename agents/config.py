@@ -25,8 +25,10 @@ only keys rl-zoo3 understands:
 - ``normalize``: ``false`` or a mapping of ``VecNormalize`` arguments
   (``norm_obs``, ``norm_reward``, ...; ``gamma`` defaults to the algorithm's)
 - ``env_kwargs``: training-only environment options of the recipe (e.g. a tighter
-  ``state_bound``); evaluation always uses the task's own environment (rl-zoo3 too: its
-  evaluation env takes only the command line's ``--eval-env-kwargs``)
+  ``state_bound``); ``dobs-envs evaluate``/``benchmark`` always evaluate on the task's own
+  environment. rl-zoo3 does not: its evaluation env during training and ``rl_zoo3.enjoy`` use
+  these ``env_kwargs`` unless given ``--eval-env-kwargs state_bound:1000.0`` (train) and
+  ``--env-kwargs state_bound:1000.0`` (enjoy), the task's own bound (README, "RL recipes")
 - ``env_wrapper``: ``[{gymnasium.wrappers.RescaleAction: {min_action: -1, max_action: 1}}]``
   (the agent acts in ``[-1, 1]``, mapped onto the env's bounds; the only wrapper accepted)
 - ``policy_kwargs``: rl-zoo3's string ``"dict(net_arch=[64, 64], activation_fn=nn.Tanh)"``

@@ -45,7 +45,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from dobs_envs.envs.base import agent_spaces
-from dobs_envs.linalg.validation import as_numeric
+from dobs_envs.linalg.validation import as_numeric, check_seed
 from dobs_envs.envs.centralized import central_spaces
 
 from .vec_env import SlotEncoder
@@ -129,9 +129,10 @@ class CoreVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ core API
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        seed = check_seed(seed, "seed")  # fractional or negative seeds are refused, never truncated
         if seed is None:
             seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        self._copy_seeds = [int(seed) + c for c in range(self.n_copies)]
+        self._copy_seeds = [seed + c for c in range(self.n_copies)]
         return [s for s in self._copy_seeds for _ in range(self.n_agents)]
 
     def reset(self) -> np.ndarray:

@@ -619,15 +619,15 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
                checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))
     venv = s.venv
     if point.vecnormalize is not None:
-        venv = VecNormalize.load(point.vecnormalize, venv.venv)
+        venv = _load_or_refuse(point.vecnormalize, lambda: VecNormalize.load(point.vecnormalize, venv.venv))
     kw = _algo_kwargs(recipe, venv)
     custom = {k: kw[k] for k in ("learning_rate", "clip_range") if k in kw}  # rebuilt, not unpickled closures
-    model = _algo_class(algo).load(point.model, env=venv, device="auto", custom_objects=custom,
-                                   tensorboard_log=tensorboard, verbose=verbose)
+    model = _load_or_refuse(point.model, lambda: _algo_class(algo).load(
+        point.model, env=venv, device="auto", custom_objects=custom, tensorboard_log=tensorboard, verbose=verbose))
     model.num_timesteps = point.sb3_timesteps
     model.set_random_seed(seed)
     if point.replay_buffer is not None:
-        model.load_replay_buffer(point.replay_buffer)
+        _load_or_refuse(point.replay_buffer, lambda: model.load_replay_buffer(point.replay_buffer))
     config = dict(cfg)
     config.setdefault("checkpoint_freq", s.config["checkpoint_freq"])
     config["resumes"] = list(cfg.get("resumes", [])) + [{"from": os.path.relpath(point.model, path),
@@ -639,6 +639,21 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
 
 class RunDirError(ValueError):
     """A run directory that is missing, incomplete or corrupt."""
+
+
+def _load_or_refuse(path: str, load: Callable):
+    """``load()``, or a :class:`RunDirError` naming ``path`` when the file cannot be read (corrupt, truncated)."""
+    try:
+        return load()
+    except Exception as exc:  # noqa: BLE001 -- a damaged zip/pickle fails anywhere in zipfile/torch/pickle
+        raise RunDirError(f"{path} cannot be loaded (corrupt or truncated file? {type(exc).__name__}: "
+                          f"{_first_line(exc)})") from exc
+
+
+def _first_line(exc: BaseException, limit: int = 200) -> str:
+    """The first line of ``exc``'s message, at most ``limit`` characters (for one-line errors)."""
+    text = (str(exc).strip().splitlines() or [""])[0]
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 @dataclass(frozen=True)
@@ -740,12 +755,17 @@ class TrainedAgent:
         self.model_path = files.model
         self.algo = self.config["algo"]
         self.multi_agent = bool(self.config["multi_agent"])
-        self.model = _algo_class(self.algo).load(files.model, device=device)
+        self.model = _load_or_refuse(files.model, lambda: _algo_class(self.algo).load(files.model, device=device))
         vn = files.vecnormalize
         self.vecnorm = None
         if vn is not None:
-            with open(vn, "rb") as fh:
-                self.vecnorm = pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+            def unpickle():
+                with open(vn, "rb") as fh:
+                    return pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+
+            self.vecnorm = _load_or_refuse(vn, unpickle)
+            if not hasattr(self.vecnorm, "normalize_obs"):
+                raise RunDirError(f"{vn} holds a {type(self.vecnorm).__name__}, not the run's VecNormalize")
             self.vecnorm.training = False
             self.vecnorm.norm_reward = False
 

@@ -49,6 +49,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from dobs_envs.linalg.validation import check_seed
+
 __all__ = ["SlotEncoder", "ParallelVecEnv"]
 
 
@@ -199,9 +201,10 @@ class ParallelVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ core API
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        seed = check_seed(seed, "seed")  # fractional or negative seeds are refused, never truncated
         if seed is None:
             seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        self._copy_seeds = [int(seed) + c for c in range(self.n_copies)]
+        self._copy_seeds = [seed + c for c in range(self.n_copies)]
         return [self._copy_seeds[c] for c in range(self.n_copies) for _ in range(self.n_agents)]
 
     def _copy_options(self, c: int) -> dict:

@@ -36,7 +36,7 @@ import numpy as np
 
 from .graphs import Graph, as_graph
 from .linalg.subspaces import STABILITY_TOL, orth, orth_complement, rank_tol, stable_mask, subspace_sum
-from .linalg.validation import as_matrix, as_square
+from .linalg.validation import as_array, as_float, as_int, as_matrix, as_square, check_tol
 
 __all__ = [
     "AssumptionError",
@@ -307,6 +307,7 @@ def check_stabilizable(A, B, *, margin: float = 0.0, tol: float | None = None) -
     A = as_square(A)
     n = A.shape[0]
     B = as_matrix(B, "B", rows=n, vector_as="col")
+    margin, tol = as_float(margin, "margin", minimum=0.0), check_tol(tol)
     ev = uncontrollable_eigenvalues(A, B, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -333,6 +334,7 @@ def check_detectable(A, C, *, margin: float = 0.0, tol: float | None = None, nam
     A = as_square(A)
     n = A.shape[0]
     C = as_matrix(C, "C", cols=n)
+    margin, tol = as_float(margin, "margin", minimum=0.0), check_tol(tol)
     ev = uncontrollable_eigenvalues(A.T, C.T, tol)
     scale = max(1.0, float(np.linalg.norm(A, 2))) if n else 1.0
     bad = ev[ev.real >= -float(margin) - STABILITY_TOL * scale]
@@ -368,6 +370,7 @@ def check_matching(B, B_v, *, rtol: float = MATCHING_RTOL) -> np.ndarray:
     MatchingConditionError
         With the residual and an orthonormal basis of the unmatched directions.
     """
+    rtol = as_float(rtol, "rtol", positive=True)
     B = as_matrix(B, "B")
     n, m = B.shape
     B_v = as_matrix(B_v, "B_v", rows=n, vector_as="col")
@@ -433,14 +436,21 @@ def check_collective_detectability(T_d_list: Sequence, n: int, *, tol: float | N
 
     Raises
     ------
+    ValueError
+        ``n`` not an integer >= 1, ``tol`` not None or positive, ``T_d_list`` not a sequence,
+        a basis with NaN/inf/complex entries or of the wrong shape (the message names it).
     CollectiveDetectabilityError
         With ``dimension`` of the sum and ``missing_directions`` (orthonormal
         basis of its orthogonal complement).
     """
-    n = int(n)
+    n = as_int(n, "n (the state dimension)", minimum=1)
+    tol = check_tol(tol)
+    if isinstance(T_d_list, np.ndarray) or not isinstance(T_d_list, Sequence):
+        raise ValueError(f"T_d_list must be a sequence (list or tuple) of (n, delta_i) bases, one per node, "
+                         f"got {type(T_d_list).__name__}")
     mats = []
     for i, T in enumerate(T_d_list):
-        T = np.asarray(T, dtype=float)
+        T = as_array(T, f"T_d_list[{i}]")  # refuses NaN/inf and complex entries (never cast)
         if T.ndim == 1 and T.shape[0] == n:
             T = T.reshape(n, 1)
         if T.ndim != 2 or T.shape[0] != n:
@@ -483,6 +493,7 @@ def check_exosystem_bounded(S, *, axis_rtol: float = EXO_AXIS_RTOL) -> None:
     UnboundedExosystemError
     """
     S = as_square(S, "S")
+    axis_rtol = as_float(axis_rtol, "axis_rtol", positive=True)
     k = S.shape[0]
     if k == 0:
         return

@@ -19,6 +19,8 @@ import numpy as np
 from scipy.sparse import csgraph
 from scipy.sparse import csr_matrix
 
+from .linalg.validation import as_array, as_float, as_int, check_seed
+
 __all__ = [
     "Graph",
     "as_graph",
@@ -55,18 +57,14 @@ class Graph:
     adjacency: np.ndarray
 
     def __post_init__(self) -> None:
-        if np.iscomplexobj(self.adjacency):
-            raise ValueError("Graph: adjacency must be real, got a complex array")
-        try:
-            a = np.array(self.adjacency, dtype=float, copy=True)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"Graph: adjacency must be a numeric (N, N) array ({exc})") from None
+        adj = self.adjacency
+        if isinstance(adj, np.ndarray) and adj.dtype == bool:
+            adj = adj.astype(float)  # a boolean adjacency: True = an edge of weight 1
+        a = as_array(adj, "Graph: adjacency")  # complex, strings, ragged, NaN/inf, too large: named errors
         if a.ndim != 2 or a.shape[0] != a.shape[1]:
             raise ValueError(f"Graph: adjacency must be a square (N, N) array, got shape {a.shape}")
         if a.shape[0] < 1:
             raise ValueError("Graph: adjacency must have at least one node (N >= 1)")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("Graph: adjacency contains NaN or inf")
         if np.any(a < 0):
             i, j = np.argwhere(a < 0)[0]
             raise ValueError(
@@ -110,14 +108,17 @@ class Graph:
         weights : sequence of float, optional
             Positive weight per edge (default 1, as in the paper's examples).
         """
-        n = _check_n(n_nodes, "from_edges")
-        edges = [tuple(e) for e in edges]
+        n = _check_n(n_nodes, "Graph.from_edges")
+        try:
+            edges = [tuple(e) for e in edges]
+        except TypeError:
+            raise ValueError(f"Graph.from_edges: edges must be a list of pairs (i, j), got {edges!r}") from None
         if weights is None:
             w = np.ones(len(edges))
         else:
-            if np.iscomplexobj(weights):
-                raise ValueError("Graph.from_edges: weights must be real, got complex values")
-            w = np.asarray(weights, dtype=float).reshape(-1)
+            w = np.atleast_1d(as_array(weights, "Graph.from_edges: weights"))
+            if w.ndim != 1:
+                raise ValueError(f"Graph.from_edges: weights must be a list of positive numbers, got shape {w.shape}")
             if w.shape[0] != len(edges):
                 raise ValueError(
                     f"Graph.from_edges: got {len(edges)} edges but {w.shape[0]} weights"
@@ -127,7 +128,9 @@ class Graph:
         for k, e in enumerate(edges):
             if len(e) != 2:
                 raise ValueError(f"Graph.from_edges: edge {k} = {e!r} is not a pair (i, j)")
-            i, j = (int(e[0]), int(e[1]))
+            # fractional, boolean or string node indices are refused, never truncated
+            i, j = (as_int(e[0], f"Graph.from_edges: edge {k} = {e!r}: node index"),
+                    as_int(e[1], f"Graph.from_edges: edge {k} = {e!r}: node index"))
             if not (0 <= i < n and 0 <= j < n):
                 raise ValueError(
                     f"Graph.from_edges: edge {k} = {e!r} has a node outside 0..{n - 1} "
@@ -181,7 +184,7 @@ class Graph:
 
     def neighbors(self, i: int) -> np.ndarray:
         """0-based indices ``j`` with ``a_ij > 0`` (sorted)."""
-        i = int(i)
+        i = as_int(i, "Graph.neighbors: node")
         if not 0 <= i < self.n_nodes:
             raise IndexError(f"Graph.neighbors: node {i} outside 0..{self.n_nodes - 1}")
         return np.flatnonzero(self.adjacency[i] > 0)
@@ -221,12 +224,7 @@ def as_graph(graph: "Graph | np.ndarray | Sequence[Sequence[float]]") -> Graph:
 
 
 def _check_n(n: int, who: str, minimum: int = 1) -> int:
-    if isinstance(n, (bool, np.bool_)) or int(n) != n:
-        raise ValueError(f"{who}: number of nodes must be an integer, got {n!r}")
-    n = int(n)
-    if n < minimum:
-        raise ValueError(f"{who}: number of nodes must be >= {minimum}, got {n}")
-    return n
+    return as_int(n, f"{who}: number of nodes", minimum=minimum)
 
 
 def path_graph(N: int) -> Graph:
@@ -244,9 +242,8 @@ def ring_graph(N: int) -> Graph:
 def star_graph(N: int, center: int = 0) -> Graph:
     """Star with hub ``center`` joined to every other node (unit weights)."""
     N = _check_n(N, "star_graph")
-    if not 0 <= int(center) < N:
-        raise ValueError(f"star_graph: center {center} outside 0..{N - 1}")
-    return Graph.from_edges(N, [(int(center), j) for j in range(N) if j != int(center)])
+    center = as_int(center, "star_graph: center", minimum=0, maximum=N - 1)
+    return Graph.from_edges(N, [(center, j) for j in range(N) if j != center])
 
 
 def complete_graph(N: int) -> Graph:
@@ -265,10 +262,8 @@ def random_connected_graph(N: int, edge_prob: float = 0.1, seed: int | None = 0)
     gives the same graph.
     """
     N = _check_n(N, "random_connected_graph")
-    p = float(edge_prob)
-    if not 0.0 <= p <= 1.0:
-        raise ValueError(f"random_connected_graph: edge_prob must be in [0, 1], got {edge_prob}")
-    rng = np.random.default_rng(seed)
+    p = as_float(edge_prob, "random_connected_graph: edge_prob", minimum=0.0, maximum=1.0)
+    rng = np.random.default_rng(check_seed(seed, "random_connected_graph: seed"))
     a = np.zeros((N, N))
     perm = rng.permutation(N)
     for k in range(1, N):

@@ -119,3 +119,136 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 1
     assert err == ""
+
+
+# ---------------------------------------------------------------------- issue 19, items 2-3
+def test_evaluate_json_pointing_at_a_directory(run_dir, tmp_path, capsys):
+    err = _exit2(["evaluate", "--model", run_dir, "--json", str(tmp_path)], capsys)
+    assert "--json" in err and "is a directory" in err
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage"])
+@pytest.mark.parametrize("name", ["model.zip", "vecnormalize.pkl"])
+def test_evaluate_corrupt_model_or_normaliser(run_dir, tmp_path, capsys, name, damage):
+    d = tmp_path / "r"
+    shutil.copytree(run_dir, d)
+    if not (d / name).exists():
+        pytest.skip(f"the tiny run has no {name}")
+    data = (d / name).read_bytes()
+    (d / name).write_bytes(data[: len(data) // 2] if damage == "truncated" else b"not a pickle nor a zip" * 10)
+    err = _exit2(["evaluate", "--model", str(d), "--episodes", "1"], capsys)
+    assert "--model" in err and name in err and "corrupt" in err
+
+
+def test_benchmark_out_pointing_at_a_file(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("mine")
+    for extra in ([], ["--dry-run"], ["--overwrite"]):
+        err = _exit2(["benchmark", "--env", "tracking", "--budget", "tiny", "--out", str(f), "--no-progress", *extra],
+                     capsys)
+        assert "--out" in err and "is a file" in err
+    assert f.read_text() == "mine"
+
+
+def _user_dir(tmp_path):
+    d = tmp_path / "bench"
+    (d / "tracking").mkdir(parents=True)
+    (d / "summary.json").write_text('{"mine": true}')
+    (d / "tracking" / "results.csv").write_text("my,results\n")
+    return d
+
+
+def test_benchmark_refuses_a_directory_with_user_files(tmp_path, capsys):
+    """Item 2: ``summary.json`` and ``<env>/results.csv`` of the user are never overwritten silently."""
+    from agents.benchmark import MARKER, OutDirError, foreign_entries, run_benchmark
+
+    d = _user_dir(tmp_path)
+    assert foreign_entries(str(d)) == ["summary.json", "tracking"]
+    for extra in ([], ["--dry-run"]):
+        err = _exit2(["benchmark", "--env", "tracking", "--budget", "tiny", "--out", str(d), "--no-progress", *extra],
+                     capsys)
+        assert "--out" in err and "summary.json" in err and "--overwrite" in err
+    with pytest.raises(OutDirError, match="summary.json"):  # the Python API refuses too, before writing anything
+        run_benchmark("tracking", "tiny", str(d), progress=False, workers=1)
+    assert (d / "summary.json").read_text() == '{"mine": true}'
+    assert (d / "tracking" / "results.csv").read_text() == "my,results\n"
+    assert not (d / MARKER).exists() and not (d / "models").exists()
+    # --overwrite is the way out (dry run: nothing written)
+    from dobs_envs.cli import main
+
+    assert main(["benchmark", "--env", "tracking", "--budget", "tiny", "--out", str(d), "--dry-run",
+                 "--overwrite"]) == 0
+
+
+def _benchmark_layout(root, marker: bool):
+    from agents.benchmark import MARKER
+
+    run = root / "models" / "tracking" / "tiny" / "ppo" / "s0"
+    run.mkdir(parents=True)
+    for f in ("config.json", "result.json", "model.zip", "vecnormalize.pkl", "curve.json"):
+        (run / f).write_text("{}")
+    (root / "tracking").mkdir()
+    for f in ("results.json", "results.md", "results.csv", "error_norms.png", "learning_curves.png"):
+        (root / "tracking" / f).write_text("x")
+    (root / "summary.json").write_text("{}")
+    (root / "summary.png").write_text("x")
+    if marker:
+        (root / MARKER).write_text("x")
+    return run
+
+
+@pytest.mark.parametrize("marker", [True, False], ids=["marker", "older-benchmark"])
+def test_benchmark_accepts_its_own_directory(tmp_path, marker):
+    """A previous benchmark's --out (its runs reused) is accepted without --overwrite; with the marker,
+    or, written before the marker existed, when models/ holds a run of the layout."""
+    from agents.benchmark import claim_out_dir, foreign_entries
+
+    run = _benchmark_layout(tmp_path, marker)
+    assert foreign_entries(str(tmp_path)) == []
+    (run / "notes.txt").write_text("mine")
+    (tmp_path / "models" / "tracking" / "mine").mkdir()
+    (tmp_path / "tracking" / "plot.svg").write_text("mine")
+    assert foreign_entries(str(tmp_path)) == ["models/tracking/mine", "models/tracking/tiny/ppo/s0/notes.txt",
+                                              "tracking/plot.svg"]
+    claim_out_dir(str(tmp_path), overwrite=True)
+    assert foreign_entries(str(tmp_path)) == ["models/tracking/mine", "models/tracking/tiny/ppo/s0/notes.txt",
+                                              "tracking/plot.svg"]
+
+
+def test_benchmark_claims_an_empty_or_new_directory(tmp_path):
+    from agents.benchmark import MARKER, claim_out_dir, foreign_entries
+
+    (tmp_path / "empty").mkdir()
+    for d in (tmp_path / "new", tmp_path / "empty"):
+        assert foreign_entries(str(d)) == []
+        claim_out_dir(str(d))
+        assert (d / MARKER).is_file() and foreign_entries(str(d)) == []
+
+
+def test_train_out_with_unrelated_files_says_what_is_there(tmp_path, capsys):
+    d = tmp_path / "o"
+    d.mkdir()
+    (d / "notes.txt").write_text("mine")
+    (d / "data.csv").write_text("mine")
+    err = _exit2(["train", "--out", str(d), "--no-progress"], capsys)
+    assert "holds no run" in err and "data.csv, notes.txt" in err and "--resume" not in err
+
+
+def test_train_out_with_a_complete_run_names_it(run_dir, capsys):
+    err = _exit2(["train", "--out", run_dir, "--no-progress"], capsys)
+    assert "complete ppo run on tracking" in err and "--overwrite" in err
+
+
+def test_resume_with_a_corrupt_model_is_a_usage_error(run_dir, tmp_path, capsys):
+    d = tmp_path / "r"
+    shutil.copytree(run_dir, d)
+    cfg = json.load(open(d / "config.json"))
+    shutil.rmtree(d / "checkpoints", ignore_errors=True)  # model.zip is then the only resume point
+    cfg.update(status="interrupted", sb3_timesteps=32, model_sb3_timesteps=32)  # as after Ctrl-C at 32 steps
+    json.dump(cfg, open(d / "config.json", "w"))
+    import zipfile
+
+    with zipfile.ZipFile(d / "model.zip", "w") as zf:  # a zip (resume_point skips non-zips), not a model
+        zf.writestr("data", "not SB3's data")
+    err = _exit2(["train", "--resume", str(d), "--no-progress"], capsys)
+    assert "--resume" in err and "model.zip" in err and "corrupt" in err

@@ -146,3 +146,23 @@ def test_overrides_accept_both_vocabularies():
     assert hp["policy_kwargs"] == {"net_arch": [8], "activation_fn": "relu", "log_std_init": -2.0}
     with pytest.raises(HyperparamsError, match=r"hyperparameter overrides \(--hyperparams\): policy_kwargs"):
         load_hyperparams("ppo", "tracking", overrides={"policy_kwargs": "dict(a=open('x'))"})
+
+
+def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
+    """rl-zoo3 evaluates with the recipe's training-only env_kwargs (its eval env and rl_zoo3.enjoy);
+    the README and agents/config.py tell how to give it the task's own state_bound (issue 19, item 6)."""
+    import os
+    import re
+
+    from agents.config import HYPERPARAMS_DIR
+    from dobs_envs.envs.options import EnvOptions
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    readme = open(os.path.join(root, "README.md")).read()
+    import agents.config as cfg
+
+    task = EnvOptions.defaults()["state_bound"]
+    for text in (readme, cfg.__doc__, open(os.path.join(HYPERPARAMS_DIR, "ppo.yaml")).read()):
+        given = {float(v) for v in re.findall(r"(?:--eval-env-kwargs|--env-kwargs)\s+\W*\s*state_bound:([0-9.e+]+)", text)}
+        assert given == {task}, given
+    assert "--eval-env-kwargs state_bound" in readme and "--env-kwargs state_bound" in readme

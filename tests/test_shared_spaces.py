@@ -37,7 +37,10 @@ def test_identical_spaces_and_padded_observations(mod):
     M = max(plain.action_space(a).shape[0] for a in agents)
     W = max(plain.observation_space(a).shape[0] for a in agents)
     assert act_sp == gym.spaces.Box(-1.0, 1.0, (M,), np.float32)
-    assert obs_sp.shape == (2 * W,) and obs_sp.dtype == plain.observation_space(agents[0]).dtype
+    differ = len({plain.observation_space(a).shape for a in agents}) > 1
+    # padding and the obs_mask only where the widths differ (issue 19: an all-ones mask doubled tracking's 31 to 62)
+    assert obs_sp.shape == ((2 * W,) if differ else (W,)) and obs_sp.dtype == plain.observation_space(agents[0]).dtype
+    assert shared.core.layout.masked == differ
     o_plain, _ = plain.reset(seed=3)
     o_shared, _ = shared.reset(seed=3)
     for a in agents:
@@ -45,8 +48,11 @@ def test_identical_spaces_and_padded_observations(mod):
         assert obs_sp.contains(o_shared[a])
         np.testing.assert_array_equal(o_shared[a][:w], o_plain[a])
         np.testing.assert_array_equal(o_shared[a][w:W], 0.0)
-        np.testing.assert_array_equal(o_shared[a][W:], (np.arange(W) < w).astype(np.float32))
-        assert shared.observation_layout(a)["obs_mask"] == slice(W, 2 * W)
+        if differ:
+            np.testing.assert_array_equal(o_shared[a][W:], (np.arange(W) < w).astype(np.float32))
+            assert shared.observation_layout(a)["obs_mask"] == slice(W, 2 * W)
+        else:
+            assert "obs_mask" not in shared.observation_layout(a)
         lay = plain.observation_layout(a)
         assert {k: v for k, v in shared.observation_layout(a).items() if k != "obs_mask"} == lay
         lo, hi = plain.observation_space(a).low, plain.observation_space(a).high
@@ -177,3 +183,21 @@ def test_option_validation(name):
     with pytest.raises(ValueError, match=name):
         gym.make_vec("dobs_envs/Tracking-v0", num_envs=2, **{name: 1})
     assert DObsVectorEnv(RandomNetworkEnv, 1, **{name: np.bool_(True)}).core.options.__getattribute__(name) is True
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=IDS)
+def test_padding_only_where_widths_differ(mod):
+    """Equal widths (tracking 31): the shared spaces keep the agents' width and the centralised view
+    its width (155, not 310); differing widths (random_network 30/30/28): padding + mask, 2 W."""
+    plain, shared = _pair(mod)
+    widths = {plain.observation_space(a).shape[0] for a in plain.possible_agents}
+    W = max(widths)
+    assert {shared.observation_space(a).shape for a in shared.possible_agents} == {(W if len(widths) == 1 else 2 * W,)}
+    entry = {tracking_v0: "Tracking", disturbance_rejection_v0: "DisturbanceRejection", hetero_mas_v0: "HeteroMAS",
+             random_network_v0: "RandomNetwork"}[mod]
+    g_plain = gym.make(f"dobs_envs/{entry}-v0")
+    g_shared = gym.make(f"dobs_envs/{entry}-v0", padded_observations=True)
+    if len(widths) == 1:
+        assert g_shared.observation_space.shape == g_plain.observation_space.shape
+    else:
+        assert g_shared.observation_space.shape == (2 * W * len(plain.possible_agents),)

@@ -20,16 +20,13 @@ import scipy.linalg as sla
 
 from .. import assumptions as _asm
 from ..linalg.subspaces import is_hurwitz
-from ..linalg.validation import as_matrix, as_square, as_symmetric
+from ..linalg.validation import as_float, as_matrix, as_square, as_symmetric
 
 __all__ = ["shifted_are_feedback", "lyapunov_P", "observer_are_gain", "split_gain"]
 
 
 def _shift(shift) -> float:
-    s = float(shift)
-    if not np.isfinite(s) or s < 0:
-        raise ValueError(f"shift must be a finite number >= 0, got {shift!r}")
-    return s
+    return as_float(shift, "shift", minimum=0.0)
 
 
 def shifted_are_feedback(A, B, shift: float = 0.2, Q=None, R=None) -> tuple[np.ndarray, np.ndarray]:

@@ -62,7 +62,7 @@ from ..linalg.subspaces import (
     rank_tol,
     scaled_rank,
 )
-from ..linalg.validation import as_matrix, as_square
+from ..linalg.validation import as_float, as_matrix, as_square, check_tol
 
 __all__ = [
     "StrongDetectability",
@@ -362,7 +362,8 @@ def strong_detectability(
         Absolute singular-value threshold for every rank decision. It is
         applied to the internally normalised data (``A / ||A||_2``, orthonormal
         bases of ``Im B_unknown`` and of the row space of ``C``), so it is
-        unit-free. Default: :func:`~dobs_envs.linalg.subspaces.rank_tol`.
+        unit-free. ``None`` (default: :func:`~dobs_envs.linalg.subspaces.rank_tol`)
+        or a positive finite number; anything else is a ``ValueError`` naming ``tol``.
     margin : float, optional
         Requested stability margin of the assignable part of ``E`` (in the time
         unit of ``A``): the ARE that gives ``J_2`` (posed on the observable
@@ -502,15 +503,10 @@ def strong_detectability(
        (:func:`_stabilising_injection`).
     """
     A0, B0, C0 = _validate(A, B_unknown, C)
+    tol = check_tol(tol)  # before any rank decision: a bad tol is the caller's, not the system's scaling
     n = A0.shape[0]
     p = C0.shape[0]
-    try:
-        margin_f = float(margin)
-    except (TypeError, ValueError):
-        margin_f = float("nan")
-    if isinstance(margin, (bool, np.bool_)) or not (np.isfinite(margin_f) and margin_f > 0):
-        raise ValueError(f"margin must be a positive finite number, got {margin!r}")
-    margin = margin_f
+    margin = as_float(margin, "margin", positive=True)
 
     # ---- exact scaling (implementation choice 4) -----------------------------
     # powers of two: A = 2^ka A1, every column of B and every row of C scaled to entries of

@@ -37,7 +37,7 @@ from threadpoolctl import threadpool_limits
 from .. import assumptions as _asm
 from ..graphs import Graph, as_graph
 from ..linalg.subspaces import IllConditionedError, is_hurwitz, scaled_rank
-from ..linalg.validation import as_matrix, as_square
+from ..linalg.validation import as_matrix, as_square, check_tol
 from .gains import observer_are_gain
 from .lemma2 import StrongDetectability, lemma2_residuals, strong_detectability
 
@@ -349,6 +349,7 @@ def design_distributed_observer(
         Assumption 6 fails (``sum_i Im T_id != R^n``).
     """
     A = as_square(A, "A", nonempty=True)
+    tol = check_tol(tol)
     n = A.shape[0]
     if isinstance(channels, np.ndarray) and channels.ndim == 2:
         raise ValueError(

@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from ..linalg.validation import NUMERIC_KINDS, as_numeric
+from ..linalg.validation import NUMERIC_KINDS, as_numeric, check_seed
 from .distributions import DEFAULT_INIT_NOISE
 from .options import RENDER_MODES, EnvOptions
 from .rendering import LivePlot
@@ -44,7 +44,7 @@ def agent_spaces(core) -> tuple[list, list]:
     Actions: ``Box(-b_k, b_k, (m_k,), float32)`` with channel ``k``'s bounds, or with
     ``normalized_actions`` the common ``Box(-1, 1, (M,), float32)`` (``M = max_k m_k``).
     Observations: ``Box(low_k, high_k)`` of agent ``k``'s width (``padded_observations``: the
-    same padded-and-masked Box for every agent).
+    same Box for every agent, padded and masked where the widths differ).
     """
     obs = [spaces.Box(*core.observation_bounds(k), dtype=core.obs_dtype) for k in range(core.n_agents)]
     if core.normalized_actions:
@@ -143,7 +143,10 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
     def reset(self, seed: int | None = None, options: dict | None = None):
         """Start an episode. ``seed`` reseeds the environment's generator (initial state,
         disturbance) and the spaces (agent ``k``: ``seed + k``). ``options`` may hold ``"x0"``,
-        ``"v0"`` and ``"x_r0"`` (exact initial plant state, unknown input, reference-model state)."""
+        ``"v0"`` and ``"x_r0"`` (exact initial plant state, unknown input, reference-model state).
+        A ``seed`` that is not None or a non-negative int, or ``options`` that are not a dict, raise
+        ``ValueError`` naming them (nothing is reset)."""
+        seed = check_seed(seed, "seed")
         if seed is not None:
             for k, a in enumerate(self.possible_agents):
                 self._action_spaces[a].seed(int(seed) + k)
@@ -331,8 +334,9 @@ def make_parallel_env(scenario, **options) -> DObsParallelEnv:
     - ``render_mode`` (None | "rgb_array" | "human": a live matplotlib window; headless: a warning).
     - ``normalized_actions`` (False): every agent acts in ``Box(-1, 1, (M,))`` (``M`` the largest
       channel width; entries beyond the agent's own channels are ignored), mapped onto the
-      channels' bounds; ``padded_observations`` (False): every agent observes its observation
-      zero-padded to the widest agent's width plus a 0/1 mask of the same width. Together they
+      channels' bounds; ``padded_observations`` (False): where the agents' widths differ, every
+      agent observes its observation zero-padded to the widest agent's width plus a 0/1 mask of
+      the same width (equal widths: unchanged), with common bounds. Together they
       give all agents identical spaces (parameter sharing without wrappers).
 
     Raises the design layer's :class:`~dobs_envs.assumptions.AssumptionError` when the

@@ -15,8 +15,8 @@ dict round trip); the parallel env's diagnostics (``state()``, ``estimation_erro
   clipped, NaN/inf or a wrong shape raise ``ValueError`` (naming the agent
   whose channel holds the NaN); with ``normalized_actions=True`` the action is
   ``Box(-1, 1, (m,))`` and input ``j`` is ``a_j * b_j`` (no padding: one agent);
-- ``padded_observations=True``: each agent's part is its padded observation and mask
-  (as in the parallel env), so ``agent_observation_slices`` stay the agents' observations;
+- ``padded_observations=True``: each agent's part is its observation as in the parallel env
+  (padded and masked only where the agents' widths differ), so ``agent_observation_slices`` stay the agents' observations;
 - reward: the team reward; ``terminated`` as the parallel env; info (the same keys from
   ``reset`` on, numeric only): ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,),
   ``gamma_s`` (N,), the task error if the task has one (e.g. ``disagreement``) and the integer
@@ -52,7 +52,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..linalg.validation import as_numeric
+from ..linalg.validation import as_numeric, check_seed
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 from .base import DObsParallelEnv
 
@@ -61,8 +61,8 @@ __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "rejec
 
 def central_spaces(core):
     """``(observation Box, action Box, agent observation slices)`` of the centralised view of ``core``:
-    the agents' observations concatenated in agent order (``padded_observations``: each padded and
-    masked), all inputs stacked (``normalized_actions``: ``Box(-1, 1, (m,))``, input ``j`` scaled
+    the agents' observations concatenated in agent order (``padded_observations``: each as the
+    parallel env gives it, padded and masked where the widths differ), all inputs stacked (``normalized_actions``: ``Box(-1, 1, (m,))``, input ``j`` scaled
     by its bound, ``core.action_scale``)."""
     lows, highs, sl, pos = [], [], [], 0
     for k, w in enumerate(core.obs_widths):
@@ -103,7 +103,7 @@ class CentralizedEnv(gym.Env):
         return out
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=check_seed(seed, "seed"))
         self.core.set_generator(0, self.np_random)  # one generator for the episode distribution
         if seed is not None:
             self.action_space.seed(int(seed))

@@ -14,7 +14,7 @@ nodes, ``m`` inputs, ``D`` the widest agent observation.
 ``advance(u)``                      one control step of every copy; ``u (B, m)``; returns
                                     :class:`StepResult` ``(reward, terminated, truncated, reason)``
 ``observations``                    ``(B, K, D)`` padded observations (``obs_widths[k]`` true widths;
-                                    ``padded_observations``: every agent ``D`` wide, mask included)
+                                    ``padded_observations``: every agent ``D`` wide, mask included where widths differ)
 ``agent_inputs(a)``                 the agents' actions concatenated ``(B, sum(agent_action_widths))``
                                     -> inputs ``(B, m)`` (``normalized_actions``: gathered from the
                                     padded actions and scaled by ``action_scale``)
@@ -50,11 +50,12 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric
+from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric, check_seed
 from ..sim import SimParams, SimState
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
@@ -214,7 +215,7 @@ class EnvCore:
         self.obs_dtype = np.dtype(o.obs_dtype)
         comps = resolve_components(o.observation, has_reference=self.has_reference, has_unknown_input=m_v > 0)
         p_i = [c.shape[0] for c in sc.C]
-        #: option padded_observations: every agent observes its padded observation and a 0/1 mask
+        #: option padded_observations: identical agent spaces (padding and a 0/1 mask where widths differ)
         self.padded_observations = o.padded_observations
         self.layout = L = FeatureLayout(p_i, n, m, m_v, [sc.graph.neighbors(i) for i in range(N)], self.links,
                                         self.channel_slices, comps, padded=o.padded_observations)
@@ -398,11 +399,19 @@ class EnvCore:
         """
         rows = self._rows(indices)
         k = rows.size
-        options = options or {}
+        if options is None:
+            options = {}
+        elif not isinstance(options, Mapping):
+            raise ValueError(f"options must be None or a dict (keys 'x0', 'v0', 'x_r0'), got "
+                             f"{type(options).__name__} {options!r}")
         if seeds is not None:
-            seeds = list(seeds)
+            try:
+                seeds = list(seeds)
+            except TypeError:
+                raise ValueError(f"seeds must be None or one seed (int or None) per reset copy, got {seeds!r}") from None
             if len(seeds) != k:
                 raise ValueError(f"seeds must have one entry per reset copy ({k}), got {len(seeds)}")
+            seeds = [check_seed(s, "seed") for s in seeds]  # all checked before any copy is reset
         n, m_v, sc = self.n_states, self.n_unknown, self.scenario
         x0s = self._per_copy(options, "x0", k, n)
         v0s = self._per_copy(options, "v0", k, m_v) if m_v else None
@@ -413,10 +422,7 @@ class EnvCore:
         dist, random_v = self.distribution, self.disturbance == "random"
         for j, c in enumerate(rows):
             if seeds is not None and seeds[j] is not None:
-                s = seeds[j]
-                if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
-                    raise ValueError(f"seeds must be non-negative integers or None, got {s!r}")
-                self._rngs[c] = np.random.default_rng(int(s))
+                self._rngs[c] = np.random.default_rng(seeds[j])
             rng = self.generator(c)
             X0[j] = dist.x0(rng) if x0s is None else x0s[j]
             V0[j], sig = dist.disturbance_params(rng, None if v0s is None else v0s[j])

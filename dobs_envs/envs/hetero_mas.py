@@ -103,6 +103,9 @@ class HeteroMASEnv(DObsParallelEnv):
     ## Version History
 
     * v0: initial release.
+    * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
+      observation widths differ (before: always, doubling the width; the default spaces are
+      unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}

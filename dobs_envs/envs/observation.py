@@ -43,11 +43,15 @@ reference), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s, v, time)`
 (each only where it exists).
 
 Padded observations (option ``padded_observations=True``, ``FeatureLayout(..., padded=True)``):
-every agent observes ``2 W`` values, ``W`` the widest agent's width: its own observation
-followed by zeros up to ``W``, then the component ``obs_mask`` (``W`` entries, 1 where the entry
-is real, 0 for padding). The gathers point the padding at the constant 0 and the mask at the
-constants 1/0 of ``f``, so the compiled step writes the mask itself; every agent gets the same
-bounds (the union over the agents, see :meth:`FeatureLayout.bounds`), hence identical spaces.
+when the agents' widths differ, every agent observes ``2 W`` values, ``W`` the widest agent's
+width: its own observation followed by zeros up to ``W``, then the component ``obs_mask`` (``W``
+entries, 1 where the entry is real, 0 for padding). The gathers point the padding at the constant
+0 and the mask at the constants 1/0 of ``f``, so the compiled step writes the mask itself. When
+every agent already has width ``W`` (tracking, disturbance_rejection, hetero_mas, random networks
+whose agents measure and control alike) nothing is added: no padding, no ``obs_mask`` (it would
+be all ones and double the width). Either way every agent gets the same bounds (the union over the
+agents, see :meth:`FeatureLayout.bounds`), hence identical spaces (:attr:`FeatureLayout.masked`
+tells which case holds).
 """
 from __future__ import annotations
 
@@ -97,8 +101,10 @@ class FeatureLayout:
     links : (K,) linked observer node per controller node.
     channel_slices : per controller node, its columns of ``u`` (and ``r``).
     components : tuple of selected component names.
-    padded : every agent observes its observation zero-padded to the widest agent's width ``W``
-        followed by the ``obs_mask`` component (``W`` entries, 1 = real entry); see module doc.
+    padded : identical agent spaces: where the agents' widths differ, every agent observes its
+        observation zero-padded to the widest agent's width ``W`` followed by the ``obs_mask``
+        component (``W`` entries, 1 = real entry); with equal widths only the bounds are united
+        (see module doc).
     """
 
     def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components, padded: bool = False):
@@ -163,8 +169,11 @@ class FeatureLayout:
         #: true width of every agent's own observation (without padding and mask)
         self.feature_widths = np.array([ix.size for ix in self.agent_index], dtype=np.intp)
         self.padded = bool(padded)
-        if self.padded:
-            W = int(self.feature_widths.max()) if len(self.feature_widths) else 0
+        W = int(self.feature_widths.max()) if len(self.feature_widths) else 0
+        #: padded layout whose agents differ in width: padding and the ``obs_mask`` component are added
+        #: (agents of equal widths already have identical shapes: nothing is added, only the bounds unite)
+        self.masked = self.padded and bool(np.any(self.feature_widths != W))
+        if self.masked:
             for k, ix in enumerate(self.agent_index):
                 w = ix.size
                 pad = np.full(W - w, self.zero, dtype=np.intp)
@@ -221,8 +230,9 @@ class FeatureLayout:
         if not self.padded:
             return self._own_bounds(k, dtype)
         W = int(self.feature_widths.max())
-        low = np.full(2 * W, np.inf, dtype=dtype)
-        high = np.full(2 * W, -np.inf, dtype=dtype)
+        D = 2 * W if self.masked else W
+        low = np.full(D, np.inf, dtype=dtype)
+        high = np.full(D, -np.inf, dtype=dtype)
         for j, w in enumerate(self.feature_widths):
             lo, hi = self._own_bounds(j, dtype)
             np.minimum(low[:w], lo, out=low[:w])

@@ -15,14 +15,14 @@ arguments are: [...]``.
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import MISSING, dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
-from ..linalg.validation import NUMERIC_KINDS
+from ..linalg.validation import NUMERIC_KINDS, as_flag, as_float, as_int, check_seed
+from ..scenarios.random import GRAPH_TOPOLOGIES, MAX_SIZE
 
 __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
 
@@ -32,13 +32,6 @@ REWARDS = ("quadratic", "log", "sqrt")
 DISTURBANCES = ("exosystem", "random", "none")
 #: render modes of every environment ("human": a live matplotlib window, see dobs_envs.envs.rendering)
 RENDER_MODES = ("human", "rgb_array")
-
-_NUM = (int, float, np.integer, np.floating)
-
-
-def _is_num(v) -> bool:
-    return isinstance(v, _NUM) and not isinstance(v, bool)
-
 
 @dataclass(frozen=True, eq=False)
 class EnvOptions:
@@ -93,10 +86,11 @@ class EnvOptions:
         ``j >= m_k`` are ignored. The centralised views (``gym.make``, ``gym.make_vec``) then
         take ``Box(-1, 1, (m,))`` (all inputs stacked, each scaled by its bound; no padding).
     padded_observations : bool
-        Every agent observes ``2 W`` values (``W`` the widest agent observation): its own
-        observation zero-padded to ``W``, then a 0/1 mask of ``W`` entries (1 = real entry;
-        component ``"obs_mask"`` of ``observation_layout``), with the same bounds for every
-        agent. With ``normalized_actions`` every agent has identical spaces: one shared policy
+        Identical observation spaces: where the agents' widths differ, every agent observes ``2 W``
+        values (``W`` the widest agent observation): its own observation zero-padded to ``W``, then
+        a 0/1 mask of ``W`` entries (1 = real entry; component ``"obs_mask"`` of
+        ``observation_layout``); where every agent already has width ``W``, its observation as it
+        is (no padding, no mask). Either way the same bounds for every agent (the union). With ``normalized_actions`` every agent has identical spaces: one shared policy
         (parameter sharing in SuperSuit, RLlib, BenchMARL, TorchRL) needs no wrapper.
     """
 
@@ -154,24 +148,17 @@ class EnvOptions:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
         if isinstance(self.scenario, os.PathLike):
             set_("scenario", os.fspath(self.scenario))
-        dt, sub = self.dt, self.substeps
-        if not (_is_num(dt) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive finite number, got {dt!r}")
-        if isinstance(sub, bool) or not isinstance(sub, (int, np.integer)) or sub < 1:
-            raise ValueError(f"substeps must be a positive integer, got {sub!r}")
-        set_("dt", float(dt))
-        set_("substeps", int(sub))
+        set_("dt", as_float(self.dt, "dt", positive=True))
+        set_("substeps", as_int(self.substeps, "substeps", minimum=1))
         mc, hz = self.max_cycles, self.horizon
         if mc is not None and hz is not None:
             raise ValueError("give either max_cycles (control steps) or horizon (seconds), not both")
         if mc is not None:
-            if isinstance(mc, bool) or not isinstance(mc, (int, np.integer)) or mc < 1:
-                raise ValueError(f"max_cycles must be a positive integer, got {mc!r}")
-            set_("max_cycles", int(mc))
-        if hz is not None and not (_is_num(hz) and hz > 0):
-            raise ValueError(f"horizon must be a positive number of seconds (math.inf: never truncate), got {hz!r}")
-        try:
-            dtype = np.dtype(self.obs_dtype)
+            set_("max_cycles", as_int(mc, "max_cycles", minimum=1))
+        if hz is not None:
+            set_("horizon", as_float(hz, "horizon (seconds; math.inf: never truncate)", positive=True, allow_inf=True))
+        try:  # np.dtype(None) is float64: None is refused, not taken as a default
+            dtype = np.dtype(self.obs_dtype) if self.obs_dtype is not None else None
         except TypeError:
             dtype = None
         if dtype not in (np.float32, np.float64):
@@ -200,35 +187,21 @@ class EnvOptions:
                                  f"got {ab!r}")
             arr.flags.writeable = False
             set_("action_bound", float(arr) if arr.ndim == 0 else arr)
-        noise = self.init_noise
-        if noise is not None:
-            if not (_is_num(noise) and math.isfinite(noise) and noise >= 0):
-                raise ValueError(f"init_noise must be None or a finite number >= 0, got {noise!r}")
-            set_("init_noise", float(noise))
-        sb = self.state_bound
-        if not (_is_num(sb) and math.isfinite(sb) and 0 < sb <= 1e150):
-            raise ValueError(f"state_bound must be a positive number <= 1e150 (its square enters the termination "
-                             f"penalty), got {sb!r}")
-        set_("state_bound", float(sb))
-        set_("termination_penalty", bool(self.termination_penalty))
-        if self.reward not in REWARDS:
+        if self.init_noise is not None:
+            set_("init_noise", as_float(self.init_noise, "init_noise", minimum=0.0))
+        # at most 1e150: its square enters the termination penalty
+        set_("state_bound", as_float(self.state_bound, "state_bound", positive=True, maximum=1e150))
+        set_("termination_penalty", as_flag(self.termination_penalty, "termination_penalty"))  # "no" is not True
+        if not isinstance(self.reward, str) or self.reward not in REWARDS:
             raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
-        cs = self.cost_scale
-        if not (_is_num(cs) and math.isfinite(cs) and cs > 0):
-            raise ValueError(f"cost_scale must be a positive finite number (an error norm), got {cs!r}")
-        set_("cost_scale", float(cs))
-        if self.render_mode is not None and self.render_mode not in RENDER_MODES:
+        set_("cost_scale", as_float(self.cost_scale, "cost_scale (an error norm)", positive=True))
+        if self.render_mode is not None and (not isinstance(self.render_mode, str) or self.render_mode not in RENDER_MODES):
             raise ValueError(f"render_mode must be None or one of {list(RENDER_MODES)}, got {self.render_mode!r}")
-        if self.disturbance not in DISTURBANCES:
+        if not isinstance(self.disturbance, str) or self.disturbance not in DISTURBANCES:
             raise ValueError(f"disturbance must be one of {DISTURBANCES}, got {self.disturbance!r}")
-        amp = self.disturbance_amplitude
-        if not (_is_num(amp) and math.isfinite(amp) and amp >= 0):
-            raise ValueError(f"disturbance_amplitude must be finite and >= 0, got {amp!r}")
-        set_("disturbance_amplitude", float(amp))
+        set_("disturbance_amplitude", as_float(self.disturbance_amplitude, "disturbance_amplitude", minimum=0.0))
         for name in ("normalized_actions", "padded_observations"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-            set_(name, bool(getattr(self, name)))
+            set_(name, as_flag(getattr(self, name), name))
 
 
 @dataclass(frozen=True, eq=False)
@@ -239,6 +212,12 @@ class HeteroMASOptions(EnvOptions):
     q_rest: float = 0.1
     r: float = 1.0
     rho: float = 1e-3
+
+    def __post_init__(self):
+        super().__post_init__()
+        object.__setattr__(self, "q_rest", as_float(self.q_rest, "q_rest", minimum=0.0))
+        object.__setattr__(self, "r", as_float(self.r, "r", positive=True))
+        object.__setattr__(self, "rho", as_float(self.rho, "rho", minimum=0.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,5 +239,21 @@ class RandomNetworkOptions(EnvOptions):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.kind not in ("plant", "mas"):
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        if not isinstance(self.kind, str) or self.kind not in ("plant", "mas"):
             raise ValueError(f"kind must be 'plant' or 'mas', got {self.kind!r}")
+        if self.system_seed is None:
+            raise ValueError("system_seed must be a non-negative integer (the system is reproducible), got None")
+        set_("system_seed", check_seed(self.system_seed, "system_seed"))
+        for name in ("n_states", "n_controllers", "n_observers", "n_agents"):
+            set_(name, as_int(getattr(self, name), name, minimum=1, maximum=MAX_SIZE))
+        if isinstance(self.graph, str) and self.graph not in GRAPH_TOPOLOGIES:
+            raise ValueError(f"graph must be one of {GRAPH_TOPOLOGIES} (or a Graph / adjacency matrix), got {self.graph!r}")
+        if not isinstance(self.graph, str) and isinstance(self.graph, (bool, int, float, complex, np.number)):
+            raise ValueError(f"graph must be one of {GRAPH_TOPOLOGIES} (or a Graph / adjacency matrix), got {self.graph!r}")
+        set_("edge_prob", as_float(self.edge_prob, "edge_prob (a probability)", minimum=0.0, maximum=1.0))
+        set_("unknown_input", as_flag(self.unknown_input, "unknown_input"))
+        if self.controller is not None and not isinstance(self.controller, str):
+            raise ValueError(f"controller must be None or a controller name, got {self.controller!r}")
+        if self.generator_kwargs is not None and not isinstance(self.generator_kwargs, dict):
+            raise ValueError(f"generator_kwargs must be None or a dict, got {type(self.generator_kwargs).__name__}")

@@ -126,10 +126,12 @@ class TrackingEnv(DObsParallelEnv):
     ``M`` the largest number of input channels of any agent (here 1): entry ``j < m_k`` is
     mapped onto channel ``k``'s bound (``u = a * b``), entries ``j >= m_k`` are ignored
     (the centralised ``gym.make`` view then takes ``Box(-1, 1, (m,))``).
-    ``padded_observations=True`` gives every agent the observation ``[o_k, 0...0 | mask]``:
-    its own observation zero-padded to the widest agent's width ``W``, then ``W`` mask
-    entries (1 = real, 0 = padding; component ``"obs_mask"`` of ``observation_layout``),
-    with the same bounds for every agent. Use both when one policy is shared by all agents
+    ``padded_observations=True`` gives every agent the same observation space: where the agents'
+    widths differ, the observation ``[o_k, 0...0 | mask]`` (its own observation zero-padded to
+    the widest agent's width ``W``, then ``W`` mask entries, 1 = real, 0 = padding; component
+    ``"obs_mask"`` of ``observation_layout``); where every agent already has width ``W`` (here:
+    31), the observation itself, unpadded and without a mask. Either way the bounds are the same
+    for every agent (the union of theirs). Use both when one policy is shared by all agents
     (parameter sharing in SuperSuit, RLlib, BenchMARL MAPPO/IPPO, TorchRL): every agent then
     has identical spaces, which these libraries require, and ``[-1, 1]`` actions suit their
     Gaussian policies. Leave them off for per-agent policies that know their own bounds
@@ -139,6 +141,9 @@ class TrackingEnv(DObsParallelEnv):
     ## Version History
 
     * v0: initial release.
+    * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
+      observation widths differ (before: always, doubling the width; the default spaces are
+      unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}

@@ -29,13 +29,14 @@ observations, rewards and episodes for the same seed (tested bit for bit).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 from gymnasium.vector import VectorEnv
 from gymnasium.vector.utils import batch_space
 from gymnasium.vector.vector_env import AutoresetMode
 
-from ..linalg.validation import as_numeric
+from ..linalg.validation import as_numeric, check_seed
 from ..registry import ENVIRONMENTS, EnvEntry
 from .centralized import reject_horizon_options, central_spaces
 from .options import RENDER_MODES
@@ -43,6 +44,18 @@ from .rendering import LivePlot
 
 __all__ = ["DObsVectorEnv"] + [f"make_vec_{name}" for name in ENVIRONMENTS]
 
+
+
+def _reset_mask(mask, B: int) -> np.ndarray:
+    """``options["reset_mask"]``: a boolean array of shape ``(B,)`` (Gymnasium's convention)."""
+    try:
+        m = np.asarray(mask)
+    except (TypeError, ValueError):
+        m = np.array(None, dtype=object)
+    if m.dtype.kind != "b" or m.shape != (B,):
+        raise ValueError(f"options['reset_mask'] must be a boolean array of shape ({B},), got "
+                         f"{getattr(m, 'dtype', type(mask)).__str__()} array of shape {m.shape}")
+    return m
 
 class DObsVectorEnv(VectorEnv):
     """``num_envs`` copies of a dobs_envs environment class as one Gymnasium ``VectorEnv`` (see module doc).
@@ -76,19 +89,27 @@ class DObsVectorEnv(VectorEnv):
         self._live = None  # render_mode="human": copy 0's live window
 
     def reset(self, *, seed=None, options: dict | None = None):
-        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         B = self.num_envs
-        options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        rows = np.arange(B) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
-        if seed is None:
-            seeds = None
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + int(r) for r in rows]
-        else:
-            seeds = list(seed)
+        if isinstance(seed, (list, tuple, np.ndarray)):
+            seeds = [check_seed(s, "seed") for s in seed]
             if len(seeds) != B:
                 raise ValueError(f"seed must be None, an int or one seed per copy ({B}), got {len(seeds)}")
+        else:
+            seed = check_seed(seed, "seed")
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options must be None or a dict (keys 'reset_mask', 'x0', 'v0', 'x_r0'), got "
+                             f"{type(options).__name__} {options!r}")
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is not None:
+            mask = _reset_mask(mask, B)
+        super().reset(seed=seed if isinstance(seed, int) else None)
+        rows = np.arange(B) if mask is None else np.flatnonzero(mask)
+        if seed is None:
+            seeds = None
+        elif isinstance(seed, int):
+            seeds = [seed + int(r) for r in rows]
+        else:
             seeds = [seeds[r] for r in rows]
         self.core.reset(rows, seeds, options)
         self._autoreset[rows] = False

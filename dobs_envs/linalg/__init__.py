@@ -9,6 +9,7 @@ package, which keeps the import graph acyclic.
 """
 from .subspaces import *  # noqa: F401,F403
 from .subspaces import __all__ as _subspaces_all
-from .validation import as_array, as_matrix, as_numeric, as_square, as_symmetric, check_tol
+from .validation import as_array, as_flag, as_float, as_int, as_matrix, as_numeric, as_square, as_symmetric, check_seed, check_tol
 
-__all__ = list(_subspaces_all) + ["as_array", "as_matrix", "as_numeric", "as_square", "as_symmetric", "check_tol"]
+__all__ = list(_subspaces_all) + ["as_array", "as_matrix", "as_numeric", "as_square", "as_symmetric", "check_tol",
+                                   "as_int", "check_seed", "as_flag", "as_float"]

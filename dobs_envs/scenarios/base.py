@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 
 from ..graphs import Graph, as_graph
-from ..linalg.validation import as_array, as_symmetric
+from ..linalg.validation import as_array, as_float, as_int, as_symmetric
 from ..sim.state import SimParams
 from .signals import Sinusoids
 
@@ -44,16 +44,8 @@ def _ro(a, name, shape=None, ndim=None):
 
 
 def _index(v, name) -> int:
-    """A 0-based index: an integer (``bool``/non-integral floats are rejected)."""
-    if isinstance(v, (bool, np.bool_)):
-        raise ValueError(f"Scenario.{name} must be an integer index, got {v!r}")
-    try:
-        iv = int(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"Scenario.{name} must be an integer index, got {v!r}") from None
-    if iv != v:
-        raise ValueError(f"Scenario.{name} must be an integer index, got {v!r}")
-    return iv
+    """A 0-based index: an integer (``bool``, non-integral or non-finite floats, strings are rejected)."""
+    return as_int(v, f"Scenario.{name} (an integer index)")
 
 
 def _sym(M: np.ndarray, name: str, definite: bool) -> np.ndarray:
@@ -63,13 +55,8 @@ def _sym(M: np.ndarray, name: str, definite: bool) -> np.ndarray:
 
 
 def _scalar(v, name) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"Scenario.{name} must be a real number, got {v!r}") from None
-    if not np.isfinite(f):
-        raise ValueError(f"Scenario.{name} must be finite, got {f}")
-    return f
+    """A finite real number (bool, complex, strings, NaN/inf, beyond-float integers refused)."""
+    return as_float(v, f"Scenario.{name}")
 
 
 def _embed(M: np.ndarray, offset: int, n: int, axis: int) -> np.ndarray:

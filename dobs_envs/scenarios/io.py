@@ -43,7 +43,9 @@ key                    value
                        the composite system of Section AIHMAS
 =====================  =====================================================================
 
-Unknown keys are rejected (the error names them and lists the valid keys);
+Unknown keys are rejected (the error names them and lists the valid keys), and so are
+a key given twice in one mapping, booleans where numbers are expected (YAML reads
+``yes``/``no``/``on``/``off`` as booleans) and numbers beyond the float range;
 every error raised while reading a file is a :class:`ScenarioFileError` naming
 the file and the key. :func:`save_scenario` writes every field explicitly
 (``K`` and ``P`` included), with floats in their shortest round-trip
@@ -103,6 +105,44 @@ class ScenarioFileError(ValueError):
         self.source, self.key, self.detail = source, key, detail
         where = f"{source}: key {key!r}: " if key else f"{source}: "
         super().__init__(where + detail)
+
+
+class _DuplicateKeyError(ValueError):
+    """A mapping of a scenario file lists ``key`` twice (YAML and JSON parsers keep the last value silently)."""
+
+    def __init__(self, key, line: int | None = None):
+        self.key, self.line = key, line
+        super().__init__(key)
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (merge keys ``<<`` may still be overridden)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    dup = key in seen
+                except TypeError:  # unhashable: the base class reports it
+                    continue
+                if dup:
+                    raise _DuplicateKeyError(key, key_node.start_mark.line + 1)
+                seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def _unique_pairs(pairs):
+    """``json.loads`` hook: a dict, refusing a key given twice."""
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKeyError(k)
+        out[k] = v
+    return out
 
 
 def example_path(name: str) -> str:
@@ -167,7 +207,7 @@ def _graph_from(spec, N: int, source: str) -> Graph:
             if topo == "random":
                 if "seed" not in spec:
                     raise ScenarioFileError(source, "graph.seed", "'topology: random' needs an integer seed")
-                return random_connected_graph(n_nodes, float(spec.get("edge_prob", 0.3)), seed=int(spec["seed"]))
+                return random_connected_graph(n_nodes, spec.get("edge_prob", 0.3), seed=spec["seed"])
             if "edge_prob" in spec or "seed" in spec:
                 raise ScenarioFileError(source, "graph", "'edge_prob'/'seed' only apply to 'topology: random'")
             if topo not in _TOPOLOGIES:
@@ -233,6 +273,44 @@ def _compose_mas(agents):
     return A, channels, C
 
 
+_FLOAT_MAX = float(np.finfo(np.float64).max)
+#: keys whose values are text or free-form (not numbers)
+_TEXT_KEYS = ("metadata", "name", "description", "controller")
+
+
+#: a number written as YAML 1.2 / JSON would (PyYAML reads YAML 1.1, where ``1e-3`` without a dot is a string)
+_NUMBER = re.compile(r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?")
+
+
+def _numbers(v):
+    """``v`` with every string that spells a number (``"1e-3"``: YAML 1.1 reads it as a string) as a float."""
+    if isinstance(v, str):
+        return float(v) if _NUMBER.fullmatch(v.strip()) else v
+    if isinstance(v, Mapping):
+        return {k: _numbers(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_numbers(x) for x in v]
+    return v
+
+
+def _check_scalars(v, source: str, key: str) -> None:
+    """Refuse, naming the key path, the scalars no Scenario field holds: booleans (YAML reads ``yes``,
+    ``no``, ``on``, ``off``, ``true``, ``false`` as booleans; ``np.array([True], float)`` would make
+    them 1.0 silently) and numbers beyond the float range (``1e400`` in JSON, a long integer)."""
+    if isinstance(v, (bool, np.bool_)):
+        raise ScenarioFileError(source, key, f"holds the boolean {v!r} where a number is expected (YAML reads "
+                                             f"yes/no/on/off/true/false as booleans; write 1 or 0)")
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        if abs(int(v)) > _FLOAT_MAX:
+            raise ScenarioFileError(source, key, "holds a number too large for a float (|x| > 1.8e308)")
+    elif isinstance(v, Mapping):
+        for k, x in v.items():
+            _check_scalars(x, source, f"{key}.{k}")
+    elif isinstance(v, (list, tuple)):
+        for i, x in enumerate(v):
+            _check_scalars(x, source, f"{key}[{i}]")
+
+
 def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scenario:
     """Build a :class:`Scenario` from the file format (module docstring). ``d`` is not modified.
 
@@ -243,6 +321,10 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     """
     d = _mapping(d, source, None)
     _reject_unknown(d, VALID_KEYS, source, None)
+    d = {k: v if k in _TEXT_KEYS else _numbers(v) for k, v in d.items()}
+    for key, value in d.items():
+        if key not in _TEXT_KEYS:
+            _check_scalars(value, source, key)
     kw: dict = {}
     agents = None
     if "mas_agents" in d:
@@ -427,7 +509,10 @@ def load_scenario(path) -> Scenario:
     except UnicodeDecodeError as exc:
         raise ScenarioFileError(path, None, f"is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
-        data = yaml.safe_load(text) if fmt == "yaml" else json.loads(text)
+        data = yaml.load(text, Loader=_StrictLoader) if fmt == "yaml" else json.loads(text, object_pairs_hook=_unique_pairs)
+    except _DuplicateKeyError as exc:
+        where = f" (line {exc.line})" if exc.line else ""
+        raise ScenarioFileError(path, str(exc.key), f"is given twice in one mapping{where}; give each key once") from None
     except (yaml.YAMLError, json.JSONDecodeError) as exc:
         raise ScenarioFileError(path, None, f"cannot parse {fmt.upper()}: {exc}") from None
     except (RecursionError, OverflowError, ValueError) as exc:  # pathological nesting / numbers

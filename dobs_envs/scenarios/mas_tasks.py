@@ -60,6 +60,7 @@ import scipy.linalg as sla
 
 from ..design.gains import shifted_are_feedback
 from ..graphs import ring_graph
+from ..linalg.validation import as_float
 from .base import Scenario
 from .paper import ne1_agents
 
@@ -146,9 +147,7 @@ def rendezvous_cost(agents=None, q_rest: float = DEFAULT_Q_REST) -> np.ndarray:
         Symmetric PSD; ``Q S^T 1 = 0`` (the common position is free).
     """
     agents = ne1_agents() if agents is None else agents
-    q_rest = float(q_rest)
-    if not (np.isfinite(q_rest) and q_rest >= 0):
-        raise ValueError(f"q_rest must be finite and >= 0, got {q_rest}")
+    q_rest = as_float(q_rest, "q_rest", minimum=0.0)
     S, n = _selector(agents)
     N = S.shape[0]
     Pi = (N * np.eye(N) - np.ones((N, N))) / N
@@ -179,11 +178,7 @@ def rendezvous_lqr(agents=None, *, q_rest: float = DEFAULT_Q_REST, r: float = 1.
         ``K = -R^{-1} B^T X``; the rows of agent ``i``'s input form ``K_i``.
     """
     agents = ne1_agents() if agents is None else agents
-    r, rho = float(r), float(rho)
-    if not (np.isfinite(r) and r > 0):
-        raise ValueError(f"r must be finite and > 0, got {r}")
-    if not (np.isfinite(rho) and rho >= 0):
-        raise ValueError(f"rho must be finite and >= 0, got {rho}")
+    r, rho = as_float(r, "r", positive=True), as_float(rho, "rho", minimum=0.0)
     Q = rendezvous_cost(agents, q_rest)
     A = sla.block_diag(*[np.atleast_2d(np.asarray(a, dtype=float)) for a, _, _ in agents])
     B = sla.block_diag(*[np.asarray(b, dtype=float).reshape(np.atleast_2d(np.asarray(a)).shape[0], -1)

@@ -58,6 +58,7 @@ from .. import assumptions as _asm
 from ..design.gains import lyapunov_P, shifted_are_feedback
 from ..graphs import Graph, as_graph, complete_graph, path_graph, random_connected_graph, ring_graph, star_graph
 from ..linalg.subspaces import is_hurwitz
+from ..linalg.validation import as_flag, as_float, as_int, check_seed
 from .base import CONTROLLERS, Scenario
 from .signals import Sinusoids
 
@@ -85,10 +86,10 @@ class RandomScenarioError(RuntimeError):
 
 
 # ---------------------------------------------------------------------- helpers
-def _check_seed(seed) -> int:
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a nonnegative integer (reproducibility), got {seed!r}")
-    return int(seed)
+def _check_seed(seed, name: str = "seed") -> int:
+    if seed is None:
+        raise ValueError(f"{name} must be a nonnegative integer (reproducibility), got None")
+    return check_seed(seed, name)
 
 
 def _check_range(r, name, *, integer=False, lo=None) -> tuple:
@@ -97,13 +98,9 @@ def _check_range(r, name, *, integer=False, lo=None) -> tuple:
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a pair (low, high), got {r!r}") from None
     if integer:
-        if int(a) != a or int(b) != b:
-            raise ValueError(f"{name} must be integers, got {r!r}")
-        a, b = int(a), int(b)
+        a, b = as_int(a, f"{name}[0]", maximum=MAX_SIZE), as_int(b, f"{name}[1]", maximum=MAX_SIZE)
     else:
-        a, b = float(a), float(b)
-        if not (np.isfinite(a) and np.isfinite(b)):
-            raise ValueError(f"{name} must be finite, got {r!r}")
+        a, b = as_float(a, f"{name}[0]"), as_float(b, f"{name}[1]")
     if a > b:
         raise ValueError(f"{name} must satisfy low <= high, got {r!r}")
     if lo is not None and a < lo:
@@ -112,16 +109,17 @@ def _check_range(r, name, *, integer=False, lo=None) -> tuple:
 
 
 def _check_prob(p, name) -> float:
-    p = float(p)
-    if not 0.0 <= p <= 1.0:
-        raise ValueError(f"{name} must be a probability in [0, 1], got {p}")
-    return p
+    return as_float(p, f"{name} (a probability)", minimum=0.0, maximum=1.0)
 
 
-def _count(v, name, minimum=1) -> int:
-    if isinstance(v, (bool, np.bool_)) or int(v) != v or int(v) < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {v!r}")
-    return int(v)
+#: largest size (states, agents, controller or observer nodes, block dimensions) the generators accept:
+#: the design costs O(N n^3) and the simulation holds B x N x n estimates, so larger systems are refused
+#: with a named error instead of running for hours or failing to allocate
+MAX_SIZE = 1000
+
+
+def _count(v, name, minimum=1, maximum: int | None = MAX_SIZE) -> int:
+    return as_int(v, name, minimum=minimum, maximum=maximum)
 
 
 def random_spectrum(rng: np.random.Generator, n: int, *, real_range=(-1.0, 0.5), imag_range=(0.2, 2.0),
@@ -240,7 +238,7 @@ def _verify(sc: Scenario) -> None:
 
 
 def _attempts(max_attempts) -> int:
-    return _count(max_attempts, "max_attempts")
+    return _count(max_attempts, "max_attempts", maximum=None)
 
 
 # ---------------------------------------------------------------------- MAS
@@ -347,9 +345,8 @@ def random_mas_scenario(
     min_unstable = _count(min_unstable, "min_unstable", minimum=0)
     if controller not in CONTROLLERS:
         raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
-    x0_scale = float(x0_scale)
-    if not (np.isfinite(x0_scale) and x0_scale >= 0):
-        raise ValueError(f"x0_scale must be finite and >= 0, got {x0_scale}")
+    x0_scale = as_float(x0_scale, "x0_scale", minimum=0.0)
+    edge_prob, shift = _check_prob(edge_prob, "edge_prob"), as_float(shift, "shift", minimum=0.0)
     name = f"random-mas-N{N}-seed{seed}" if name is None else name
     meta = dict(generator="random_mas_scenario", seed=seed, n_agents=N, state_dims=list(sd),
                 input_dims=list(idim), output_dims=list(odim), real_range=list(real_range),
@@ -525,9 +522,7 @@ def random_plant_scenario(
     kpn = _check_range(known_per_node, "known_per_node", integer=True, lo=0)
     if measurement not in ("selection", "gaussian"):
         raise ValueError(f"measurement must be 'selection' or 'gaussian', got {measurement!r}")
-    coupling = float(coupling)
-    if not (np.isfinite(coupling) and coupling >= 0):
-        raise ValueError(f"coupling must be finite and >= 0, got {coupling}")
+    coupling = as_float(coupling, "coupling", minimum=0.0)
     real_range = _check_range(real_range, "real_range")
     imag_range = _check_range(imag_range, "imag_range")
     exo = _check_range(exo_frequency_range, "exo_frequency_range")
@@ -537,10 +532,9 @@ def random_plant_scenario(
         controller = "adaptive_sliding_mode" if unknown_input else "feedback"
     if controller not in CONTROLLERS:
         raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
-    x0_scale, v0_scale = float(x0_scale), float(v0_scale)
-    for nm, v in (("x0_scale", x0_scale), ("v0_scale", v0_scale)):
-        if not (np.isfinite(v) and v >= 0):
-            raise ValueError(f"{nm} must be finite and >= 0, got {v}")
+    x0_scale, v0_scale = as_float(x0_scale, "x0_scale", minimum=0.0), as_float(v0_scale, "v0_scale", minimum=0.0)
+    edge_prob, shift = _check_prob(edge_prob, "edge_prob"), as_float(shift, "shift", minimum=0.0)
+    unknown_input = as_flag(unknown_input, "unknown_input")
     name = f"random-plant-n{n}-K{Kc}-N{N}-seed{seed}" if name is None else name
     meta = dict(generator="random_plant_scenario", seed=seed, n_states=n, n_controllers=Kc,
                 n_observers=N, inputs_per_controller=list(ipc), known_per_node=list(kpn),

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..linalg.validation import as_array
+
 __all__ = ["Sinusoids"]
 
 
@@ -24,10 +26,9 @@ class Sinusoids:
     phase: tuple
 
     def __post_init__(self):
-        for name in ("amplitude", "frequency", "phase"):
-            if np.iscomplexobj(getattr(self, name)):
-                raise ValueError(f"Sinusoids: {name} must be real, got complex values")
-        a, w, ph = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (self.amplitude, self.frequency, self.phase))
+        # bool, strings, ragged lists and numbers beyond the float range: named errors (shared validator)
+        a, w, ph = (np.atleast_1d(as_array(getattr(self, n), f"Sinusoids: {n}"))
+                    for n in ("amplitude", "frequency", "phase"))
         m = max(a.size, w.size, ph.size)
         try:
             a, w, ph = (np.broadcast_to(v, (m,)) for v in (a, w, ph))
