@@ -49,9 +49,10 @@ from the state it starts at (:func:`_crit`),
 
     ``max_i 2 deg_i dt (gamma_i + dt phi_i ||eps_iu||^2) <= 1``,
 
-i.e. the step is monotone (``0 <= 1 - h mu <= 1``: no sign flip of the consensus modes, so the
-gain law sees a non-increasing error) both for the gain it uses and for the gain it produces
-(the next step uses that one). Then it is the plain Euler step of length ``dt`` (every run of
+i.e. the step is monotone in the consensus modes (``0 <= 1 - h mu <= 1``: no sign flip, so the
+consensus term alone never increases the error the gain law integrates) both for the gain it uses
+and for the gain it produces (the next step uses that one; the plant and ``Ebar`` parts are those
+of the paper's runs, stable at the default ``dt``). Then it is the plain Euler step of length ``dt`` (every run of
 the paper passes this test, so its results are bitwise those of the plain scheme). Otherwise
 the interval ``dt`` is integrated by Euler steps of length ``h = min(tau, min_i h_i)``
 (:func:`_stable_step`: the largest ``h_i`` that passes the same test at node ``i``, ``tau``
