@@ -1,6 +1,7 @@
 """Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and today's main.
 
 Usage: python benchmarks/bench_envs.py [--main /work/main] [--repeats 7] [--seconds 0.4] [--no-main]
+       [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024]
 
 Everything is measured side by side in one run, interleaved (config A, B, C, ..., A, B, C,
 ...), best of ``--repeats`` short runs of about ``--seconds`` each (the machines are shared
@@ -13,7 +14,8 @@ with training runs: only ratios measured this way mean anything):
   (``threads=None``, the default: ranges of copies advanced concurrently, GIL released);
 - the same single envs of another checkout (``--main``, default ``/work/main``: today's
   main) in a worker process started with that checkout first on ``sys.path`` (and its own
-  numba cache directory, so nothing is written into it), timed in the same interleaved loop.
+  numba cache directory, so nothing is written into it), timed in the same interleaved loop,
+  and that checkout's serial vector env at the largest ``--batches`` size.
 
 It also reports the floating-point operations of one control step (simulation kernel +
 features/reward, counted from the kernels' loops) and the fraction of the 2-core FMA peak the
@@ -36,13 +38,14 @@ ENV_ID = "dobs_envs/Tracking-v0"
 POOL = 512
 
 WORKER = r'''
-import json, sys, time
+import importlib, json, sys, time
 import numpy as np
 import gymnasium as gym
 import dobs_envs
-from dobs_envs import tracking_v0
-genv = gym.make("dobs_envs/Tracking-v0")
-penv = tracking_v0.parallel_env()
+from dobs_envs.registry import ENVIRONMENTS
+ENV_ID = sys.argv[1]
+genv = gym.make(ENV_ID)
+penv = importlib.import_module(next(e.module for e in ENVIRONMENTS.values() if e.gym_id == ENV_ID)).parallel_env()
 rng = np.random.default_rng(0)
 gpool = [genv.action_space.low + (genv.action_space.high - genv.action_space.low) * rng.random(5).astype(np.float32)
          for _ in range(512)]
@@ -62,21 +65,37 @@ def run_pz(n):
             penv.reset()
         penv.step(ppool[k % 512])
     return n / (time.perf_counter() - t0)
+vecs = {}
+def run_vec(B, n):
+    if B not in vecs:
+        v = gym.make_vec(ENV_ID, num_envs=B, threads=1)
+        v.reset(seed=0)
+        r = np.random.default_rng(1)
+        vecs[B] = (v, [v.action_space.low + (v.action_space.high - v.action_space.low)
+                       * r.random(v.action_space.shape).astype(np.float32) for _ in range(8)])
+    v, acts = vecs[B]
+    t0 = time.perf_counter()
+    for k in range(n):
+        v.step(acts[k % 8])
+    return n * B / (time.perf_counter() - t0)
 run_gym(500); run_pz(500)
 print(json.dumps({"file": dobs_envs.__file__}), flush=True)
 for line in sys.stdin:
     what, n = line.split()
-    print(json.dumps((run_gym if what == "gym" else run_pz)(int(n))), flush=True)
+    if what.startswith("vec"):
+        print(json.dumps(run_vec(int(what[3:]), int(n))), flush=True)
+    else:
+        print(json.dumps((run_gym if what == "gym" else run_pz)(int(n))), flush=True)
 '''
 
 
 class Worker:
     """The single envs of a checkout in a subprocess (that checkout first on sys.path)."""
 
-    def __init__(self, checkout: str):
+    def __init__(self, checkout: str, env_id: str = ENV_ID):
         env = dict(os.environ, PYTHONPATH=checkout, PYTHONDONTWRITEBYTECODE="1",
                    NUMBA_CACHE_DIR=os.path.join(tempfile.gettempdir(), "dobs_bench_numba_" + checkout.strip("/").replace("/", "_")))
-        self.proc = subprocess.Popen([sys.executable, "-c", WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, env_id], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      text=True, env=env, cwd=tempfile.gettempdir())
         self.file = json.loads(self.proc.stdout.readline())["file"]
 
@@ -114,21 +133,25 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
     ap.add_argument("--batches", default="1,64,1024")
+    ap.add_argument("--env-id", default=ENV_ID, help="registered Gymnasium id of the env to time")
     args = ap.parse_args(argv)
+    env_id = args.env_id
 
     import gymnasium as gym
 
     import dobs_envs  # noqa: F401
-    from dobs_envs import tracking_v0
+    import importlib
+
     from dobs_envs.envs.features import flops_per_row
+    from dobs_envs.registry import ENVIRONMENTS
     from dobs_envs.sim.kernel import flops_per_period
 
     # ---------------------------------------------------------------- contestants
     rng = np.random.default_rng(0)
-    genv = gym.make(ENV_ID)
+    genv = gym.make(env_id)
     lo, hi = genv.action_space.low, genv.action_space.high
-    gpool = [lo + (hi - lo) * rng.random(5).astype(np.float32) for _ in range(POOL)]
-    penv = tracking_v0.parallel_env()
+    gpool = [lo + (hi - lo) * rng.random(lo.shape).astype(np.float32) for _ in range(POOL)]
+    penv = importlib.import_module(next(e.module for e in ENVIRONMENTS.values() if e.gym_id == env_id)).parallel_env()
     ppool = [{a: g[k:k + 1] for k, a in enumerate(penv.possible_agents)} for g in gpool]
     genv.reset(seed=0)
     penv.reset(seed=0)
@@ -153,7 +176,7 @@ def main(argv=None):
     vec = {}
     for B in batches:
         for par in (False, True):
-            v = gym.make_vec(ENV_ID, num_envs=B, threads=None if par else 1)
+            v = gym.make_vec(env_id, num_envs=B, threads=None if par else 1)
             v.reset(seed=0)
             acts = [v.action_space.low + (v.action_space.high - v.action_space.low)
                     * rng.random(v.action_space.shape).astype(np.float32) for _ in range(8)]
@@ -166,13 +189,15 @@ def main(argv=None):
             v.step(acts[k % 8])
         return n * key[0] / (time.perf_counter() - t0)
 
-    worker = None if args.no_main else Worker(args.main)
+    worker = None if args.no_main else Worker(args.main, env_id)
     configs = {"gym single (this checkout)": ("gym", None), "PettingZoo single (this checkout)": ("pz", None)}
     if worker is not None:
         configs["gym single (main)"] = ("gym", "main")
         configs["PettingZoo single (main)"] = ("pz", "main")
     for key in vec:
         configs[f"vector B={key[0]}{' threads' if key[1] else ''}"] = ("vec", key)
+    if worker is not None:
+        configs[f"vector B={batches[-1]} (main)"] = (f"vec{batches[-1]}", "main")
 
     # ---------------------------------------------------------------- calibrate run lengths, warm up
     steps = {}
@@ -181,7 +206,7 @@ def main(argv=None):
         if kind == "vec":
             rate = run_vec(key, 3) / key[0]
         elif key == "main":
-            rate = worker.run(kind, 300)
+            rate = worker.run(kind, 3) / batches[-1] if kind.startswith("vec") else worker.run(kind, 300)
         else:
             rate = fn(300)
         steps[name] = max(3, int(rate * args.seconds))
@@ -204,7 +229,7 @@ def main(argv=None):
     flops = flops_per_period(core.params) + flops_per_row(core)
     peak, peak_desc = peak_flops()
     single = best["gym single (this checkout)"]
-    print(f"{ENV_ID} (NE2, n={core.n_states}, N={core.n_nodes}, {core.substeps} Euler substeps per control step), "
+    print(f"{env_id} ({core.scenario.name}, n={core.n_states}, N={core.n_nodes}, {core.substeps} Euler substeps per control step), "
           f"best of {args.repeats} interleaved runs of ~{args.seconds:g} s")
     print(f"{'configuration':36s} {'env-steps/s':>13s} {'x gym single':>13s}")
     for name in configs:
@@ -212,13 +237,16 @@ def main(argv=None):
     if worker is not None:
         print(f"main checkout imported from {main_file}")
         print(f"single env vs main: gym {single / best['gym single (main)']:.2f}x, PettingZoo "
-              f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (main)']:.2f}x")
-    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}")), key=lambda k: best[k])
+              f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (main)']:.2f}x; "
+              f"vector B={batches[-1]} (serial) vs main: "
+              f"{best[f'vector B={batches[-1]}'] / best[f'vector B={batches[-1]} (main)']:.2f}x")
+    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}") and not k.endswith("(main)")),
+              key=lambda k: best[k])
     print(f"best B={batches[-1]}: {top} = {best[top] / single:.1f}x the gym single env (target >= 8x)")
     print(f"flops per control step: {flops:,} ({flops_per_period(core.params):,} simulation + "
           f"{flops_per_row(core):,} features/reward)")
     for name in configs:
-        if name.startswith(f"vector B={batches[-1]}"):
+        if name.startswith(f"vector B={batches[-1]}") and not name.endswith("(main)"):
             print(f"{name}: {best[name] * flops / 1e9:.1f} GFLOP/s = {best[name] * flops / peak:.1%} of the peak "
                   f"{peak / 1e9:.0f} GFLOP/s ({peak_desc})")
 

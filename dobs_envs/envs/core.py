@@ -37,8 +37,10 @@ code  name                      meaning
 ====  ========================  ============================================================
 0     ``none``                  the episode goes on (or was cut by an outer time limit,
                                 e.g. ``gym.make``'s ``TimeLimit``)
-1     ``state_bound_exceeded``  terminated: ``||x|| > state_bound``
+1     ``state_bound_exceeded``  terminated: ``||x|| > state_bound``, every entry of x finite
+                                (takes precedence over code 2)
 2     ``non_finite_state``      terminated: some entry of x, x_r, z, gamma, gamma_s, v is NaN/inf
+                                (and not code 1)
 3     ``horizon``               truncated: ``max_cycles`` control steps
 ====  ========================  ============================================================
 

@@ -70,8 +70,8 @@ def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts):
     else:
         shaped = cost
     rw = -shaped * period
-    non_finite = ~finite
-    bound = finite & (xnorm > state_bound)
+    bound = (xnorm > state_bound) & np.all(np.isfinite(x), axis=1)  # a finite plant beyond the bound: reason 1
+    non_finite = ~finite & ~bound
     tm = non_finite | bound
     rw = np.where(tm & ~np.isfinite(rw), -bound_cost, rw)
     if penalty:

@@ -11,7 +11,8 @@ which threads may run concurrently on disjoint ranges: it releases the GIL):
 4. ``t += T``, ``cycles += 1``; features, observations and the stage cost
    (:func:`dobs_envs.envs.features.features_row`);
 5. reward ``-c * T`` (quadratic) or ``-log(1 + c / c0) * T`` (log); termination with reason
-   code 2 (non-finite state: the kernel's finiteness flag) or 1 (``||x|| > state_bound``); on
+   code 1 (``||x|| > state_bound`` with every entry of ``x`` finite, whatever the other quantities)
+   or else 2 (non-finite state: the kernel's finiteness flag); on
    termination a non-finite reward becomes ``-bound_step_cost``, the termination penalty
    ``bound_step_cost * max(0, penalty_cycles - cycles)`` is charged, and the copy's
    observations and feature vector are cleaned (NaN -> 0, +-inf -> +-largest finite value of
@@ -53,6 +54,15 @@ def first_non_finite(u):
             if not np.isfinite(u[b, j]):
                 return b
     return -1
+
+
+@_njit
+def _row_finite(a, b):
+    """Whether every entry of row ``b`` of the 2-D array ``a`` is finite."""
+    for j in range(a.shape[1]):
+        if not np.isfinite(a[b, j]):
+            return False
+    return True
 
 
 @_njit
@@ -117,10 +127,10 @@ def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
         else:
             shaped = c
         rw = -shaped * period
-        if not fin:
-            tm, rs = True, REASON_NON_FINITE
-        elif xn > state_bound:
+        if xn > state_bound and _row_finite(x, b):  # a finite plant state beyond the bound: reason 1
             tm, rs = True, REASON_STATE_BOUND
+        elif not fin:
+            tm, rs = True, REASON_NON_FINITE
         else:
             tm, rs = False, REASON_NONE
         tr = False

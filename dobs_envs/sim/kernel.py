@@ -32,6 +32,42 @@ each sum is accumulated in the same order, term by term, and :data:`FASTMATH` al
 FMA contraction -- so a copy's trajectory does not depend on the batch size or on its
 position in the batch (tested bit for bit).
 
+Stable steps
+------------
+Forward Euler on the observer nodes, eq. (zidynamic) with the consensus term of eq. (H_idefine),
+and the adaptive laws of eq. (gammaiis)/(gagasbeta) is conditionally stable: the linear consensus
+term ``-gamma_i P_u,i (L xhat)_i`` has, in the coordinates ``eps_u`` of the Appendix (eq.
+(dotepsu)), the matrix ``M Gamma`` with ``M = T_u^T (L x I_n) T_u`` and ``Gamma = diag(gamma_i I)``;
+its eigenvalues ``mu`` are real, nonnegative and at most ``rho(Gamma L) <= max_i 2 deg_i gamma_i``
+(``Gamma^1/2 M Gamma^1/2 = T_u^T (Gamma^1/2 L Gamma^1/2 x I) T_u``, Gershgorin on the rows of
+``Gamma L``). An Euler step of length ``h`` multiplies these modes by ``1 - h mu``. The gain law
+``gamma_i += h phi_i ||eps_iu||^2`` grows the gain quadratically in the error, so a large error
+(a large plant state: ``||eps_iu||`` is of the order of ``deg_i ||x||``) makes ``h mu`` exceed 2,
+the modes oscillate with growing amplitude, ``||eps_iu||^2`` and with it ``gamma_i`` grow faster,
+and the state overflows within a few steps (issue 19). Each Euler step therefore first evaluates,
+from the state it starts at (:func:`_crit`),
+
+    ``max_i 2 deg_i dt (gamma_i + dt phi_i ||eps_iu||^2) <= 1``,
+
+i.e. the step is monotone in the consensus modes (``0 <= 1 - h mu <= 1``: no sign flip, so the
+consensus term alone never increases the error the gain law integrates) both for the gain it uses
+and for the gain it produces (the next step uses that one; the plant and ``Ebar`` parts are those
+of the paper's runs, stable at the default ``dt``). Then it is the plain Euler step of length ``dt`` (every run of
+the paper passes this test, so its results are bitwise those of the plain scheme). Otherwise
+the interval ``dt`` is integrated by Euler steps of length ``h = min(tau, min_i h_i)``
+(:func:`_stable_step`: the largest ``h_i`` that passes the same test at node ``i``, ``tau``
+the time left), recomputed from the state after every step, the exosystem input ``v`` held over
+the interval as the plain step holds it, and ``v <- expm(S dt) v`` once at its end. No step is
+shorter than ``dt / MAX_SPLIT``. The discontinuous term ``gamma_is h(eps_iu)`` is left out of the
+test: it moves ``eps_iu`` by at most ``h 2 deg_i gamma_is`` per step (the O(dt) chattering band of
+:mod:`.numpy_step`), a bounded perturbation that cannot make the step unstable, and its
+coefficient ``gamma_is / ||eps_iu||`` is unbounded near consensus where the paper's runs live.
+
+Per copy: :func:`period_copy` runs the test; a tile flags every lane whose test exceeds
+:data:`TILE_RECHECK` at some step and :func:`advance_rows` recomputes those copies from the
+period's start with :func:`period_copy`, so a copy's result still depends on nothing but its own
+state (the unflagged lanes pass the copy's test with a margin: the same plain steps).
+
 The constants arrive as one :class:`~dobs_envs.sim.state.KernelArgs` tuple
 (``SimParams.kernel_tuple``, built once per parameter set); from Python they are passed packed
 into two buffers (``SimParams.kernel_packed``, unpacked by :func:`unpack_kernel_args`).
@@ -59,6 +95,12 @@ TILE = 128
 #: period): 4 copies 166 copy by copy / 183 as a tile, 8 copies 240 / 115, 16 copies 480 / 161
 #: (the padded 64-copy tile used before: 369).
 MIN_TILE = 6
+#: Most steps one Euler step is split into when its stability test fails (module doc, "Stable steps"):
+#: no step is shorter than ``dt / MAX_SPLIT``, which bounds the work per control period.
+MAX_SPLIT = 4096
+#: A tile lane whose stability test exceeds this (half the limit 1 of :func:`period_copy`, a margin
+#: against any rounding difference between the layouts) is recomputed by :func:`period_copy`.
+TILE_RECHECK = 0.5
 
 try:  # numba is a hard dependency, but keep the package importable without it
     import numba
@@ -75,7 +117,7 @@ except ImportError:  # pragma: no cover
     _njit_inline = _njit
 
 
-__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "period_copy", "period_tile", "period_tile_any", "advance_rows",
+__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "MAX_SPLIT", "period_copy", "period_tile", "period_tile_any", "advance_rows",
            "unpack_kernel_args",
            "control_period_compiled", "flops_per_period"]
 
@@ -127,78 +169,131 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
     _terms(Bu, BUr, ub)
     Br[:] = 0.0
     _terms(Br, BUr, rb)
+    hmin = dt / MAX_SPLIT
     for _ in range(substeps):
-        # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
-        for q in range(N * p):
-            y[q] = 0.0
-        _terms(y, CCr, xb)
-        for q in range(N * n):
-            xhat[q] = zb[q]
-        _terms(xhat, GGr, y)
-        # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
-        for i in range(N):
+        # one Euler step of length dt; split into shorter steps (v held) when the stability
+        # test on the adaptive gains fails (module doc, "Stable steps"; eqs. (zidynamic), (gammaiis))
+        tau = dt  # time left in this Euler step
+        h = dt
+        split = False
+        first = True
+        while True:
+            # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
+            for q in range(N * p):
+                y[q] = 0.0
+            _terms(y, CCr, xb)
+            for q in range(N * n):
+                xhat[q] = zb[q]
+            _terms(xhat, GGr, y)
+            # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
+            for i in range(N):
+                for k in range(n):
+                    d[i * n + k] = deg[i] * xhat[i * n + k]
+                for q in range(maxdeg):
+                    a = nbr_w[i, q]
+                    if a != 0.0:
+                        jn = nbr_idx[i, q] * n
+                        for k in range(n):
+                            d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
+            # w_i = P_u,i d_i through the thinner of the two bases:
+            # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
+            for q in range(N * rq):
+                cq[q] = 0.0
+            _terms(cq, QTr, d)
+            for q in range(N * n):
+                w[q] = 0.0
+            _terms(w, QQr, cq)
+            crit = 0.0
+            for i in range(N):
+                nw2 = 0.0
+                for k in range(n):
+                    s = w[i * n + k]
+                    if not proj_range[i]:
+                        s = d[i * n + k] - s
+                    w[i * n + k] = s
+                    nw2 = nw2 + s * s
+                nw = np.sqrt(nw2)
+                nwv[i] = nw
+                nw2v[i] = nw2
+                coef[i] = gamma[b, i] + (gamma_s[b, i] / nw if nw > 0.0 else 0.0)  # eq. (H_idefine), h(0) = 0
+                if first:
+                    c_ = _crit(deg[i], dt, gamma[b, i], phi[i], nw2)
+                    if c_ > crit:
+                        crit = c_
+            if first:
+                split = crit > 1.0  # NaN: not split (the non-finite state propagates)
+                first = False
+            if split:
+                # the longest step h <= tau with 2 deg_i h (gamma_i + h phi_i ||eps_iu||^2) <= 1 at every node
+                hreq = tau
+                for i in range(N):
+                    hi = _stable_step(deg[i], gamma[b, i], phi[i], nw2v[i])
+                    if hi < hreq:
+                        hreq = hi
+                if hreq != hreq:
+                    h = tau  # NaN: no stable step exists, let it propagate
+                elif hreq < hmin:
+                    h = hmin  # at most MAX_SPLIT steps per Euler step
+                else:
+                    h = hreq
+                if h >= tau:
+                    h = tau
+            # eq. (zidynamic) for every node
+            for i in range(N):
+                ci = coef[i]
+                for k in range(n):
+                    zn[i * n + k] = bu[i * n + k] - ci * w[i * n + k]
+            _terms(zn, EEr, zb)
+            _terms(zn, FFr, y)
+            for q in range(N * n):
+                zb[q] = zb[q] + h * zn[q]
+            # eqs. (gammaiis)/(gagasbeta)
+            for i in range(N):
+                g = gamma[b, i]
+                gs = gamma_s[b, i]
+                gamma[b, i] = g + h * (-sigma[i] * g + phi[i] * nw2v[i])
+                gamma_s[b, i] = gs + h * (-sigma_s[i] * gs + phi_s[i] * nwv[i])
+            # eq. (LTIsys) plant and eq. (refxdy) reference model
             for k in range(n):
-                d[i * n + k] = deg[i] * xhat[i * n + k]
-            for q in range(maxdeg):
-                a = nbr_w[i, q]
-                if a != 0.0:
-                    jn = nbr_idx[i, q] * n
-                    for k in range(n):
-                        d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
-        # w_i = P_u,i d_i through the thinner of the two bases:
-        # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
-        for q in range(N * rq):
-            cq[q] = 0.0
-        _terms(cq, QTr, d)
-        for q in range(N * n):
-            w[q] = 0.0
-        _terms(w, QQr, cq)
-        for i in range(N):
-            nw2 = 0.0
+                xdot[k] = Bu[k]
+            _terms(xdot, AAr, xb)
+            _terms(xdot, BVr, vb)
+            if has_reference:
+                for k in range(n):
+                    xrdot[k] = Br[k]
+                _terms(xrdot, ARr, xrb)
+                for k in range(n):
+                    xrb[k] = xrb[k] + h * xrdot[k]
             for k in range(n):
-                s = w[i * n + k]
-                if not proj_range[i]:
-                    s = d[i * n + k] - s
-                w[i * n + k] = s
-                nw2 = nw2 + s * s
-            nw = np.sqrt(nw2)
-            nwv[i] = nw
-            nw2v[i] = nw2
-            coef[i] = gamma[b, i] + (gamma_s[b, i] / nw if nw > 0.0 else 0.0)  # eq. (H_idefine), h(0) = 0
-        # eq. (zidynamic) for every node
-        for i in range(N):
-            ci = coef[i]
-            for k in range(n):
-                zn[i * n + k] = bu[i * n + k] - ci * w[i * n + k]
-        _terms(zn, EEr, zb)
-        _terms(zn, FFr, y)
-        for q in range(N * n):
-            zb[q] = zb[q] + dt * zn[q]
-        # eqs. (gammaiis)/(gagasbeta)
-        for i in range(N):
-            g = gamma[b, i]
-            gs = gamma_s[b, i]
-            gamma[b, i] = g + dt * (-sigma[i] * g + phi[i] * nw2v[i])
-            gamma_s[b, i] = gs + dt * (-sigma_s[i] * gs + phi_s[i] * nwv[i])
-        # eq. (LTIsys) plant and eq. (refxdy) reference model
-        for k in range(n):
-            xdot[k] = Bu[k]
-        _terms(xdot, AAr, xb)
-        _terms(xdot, BVr, vb)
-        if has_reference:
-            for k in range(n):
-                xrdot[k] = Br[k]
-            _terms(xrdot, ARr, xrb)
-            for k in range(n):
-                xrb[k] = xrb[k] + dt * xrdot[k]
-        for k in range(n):
-            xb[k] = xb[k] + dt * xdot[k]
+                xb[k] = xb[k] + h * xdot[k]
+            if h >= tau:
+                break
+            tau = tau - h
         # exosystem v <- expm(S dt) v
         for j in range(mv):
             vnew[j] = 0.0
         _terms(vnew, PVr, vb)
         for j in range(mv):
             vb[j] = vnew[j]
+
+
+@_njit_inline
+def _crit(dg, dt, g, ph, nw2):
+    """Stability test of one Euler step of length ``dt`` at node i (module doc, "Stable steps"):
+    ``2 deg_i dt (gamma_i + dt phi_i ||eps_iu||^2)``, at most 1 for a stable step. The same
+    expression in :func:`period_copy` and :func:`_tile_body` (eqs. (zidynamic), (gammaiis))."""
+    return 2.0 * dg * dt * (g + dt * ph * nw2)
+
+
+@_njit_inline
+def _stable_step(dg, g, ph, nw2):
+    """The largest ``h`` with ``2 deg_i h (gamma_i + h phi_i ||eps_iu||^2) <= 1``: the positive root
+    ``2 / (a + sqrt(a^2 + 4 b))`` of ``b h^2 + a h = 1``, ``a = 2 deg_i gamma_i``,
+    ``b = 2 deg_i phi_i ||eps_iu||^2`` (inf when ``a = b = 0``); eq. (gammaiis)."""
+    a = 2.0 * dg * g
+    bb = 2.0 * dg * ph * nw2
+    den = a + np.sqrt(a * a + 4.0 * bb)
+    return 2.0 / den if den > 0.0 else np.inf
 
 
 @_njit
@@ -210,7 +305,7 @@ def _scratch_tile(ka, W):
              np.empty((n, W)), np.empty((m, W)), np.empty((m, W)))
     work = (np.empty((N, p, W)), np.empty((N, n, W)), np.empty((N, n, W)), np.empty((rq, W)), np.empty((n, W)),
             np.empty((N, n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)),
-            np.empty((n, W)), np.empty((mv, W)), np.empty(W), np.empty(W), np.empty(W))
+            np.empty((n, W)), np.empty((mv, W)), np.empty(W), np.empty(W), np.empty(W), np.empty(W))
     return state, work
 
 
@@ -248,10 +343,12 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
     (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
      phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
     BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows
-    Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw = work
+    Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
     N, n = Z.shape[0], Z.shape[1]
     p, mv = C.shape[1], B_v.shape[1]
     rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    for c in range(W):
+        FL[c] = 0.0
     for i in range(N):
         for k in range(n):
             _tile_dot(BU[i, k], None, BBr, i * n + k, U, W)
@@ -295,6 +392,12 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
             for c in range(W):
                 nw[c] = np.sqrt(nw2[c])
                 coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
+            # the stability test of period_copy (with a margin): a lane whose Euler step would be
+            # split is flagged and recomputed copy by copy (advance_rows)
+            dgi, phi_i = deg[i], phi[i]
+            for c in range(W):
+                if _crit(dgi, dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
+                    FL[c] = 1.0
             for k in range(n):
                 for c in range(W):
                     ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
@@ -381,11 +484,16 @@ def _gather(state, lo, nl, x, z, gamma, gamma_s, v, x_r, u, r):
 
 
 @_njit
-def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r):
+def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, ka):
+    """Copies ``lo .. lo+nl-1`` back from the tile, except lanes flagged in ``FL`` (stability test of
+    :func:`_tile_body`): those are advanced again from their unchanged batch rows by :func:`period_copy`."""
     X, Z, G, GS, V, XR, U, R = state
     N, n = Z.shape[0], Z.shape[1]
     for c in range(nl):
         b = lo + c
+        if FL[c] != 0.0:
+            period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, _scratch_copy(ka))
+            continue
         for k in range(n):
             x[b, k] = X[k, c]
             x_r[b, k] = XR[k, c]
@@ -409,14 +517,14 @@ def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
         while hi - b >= TILE:
             _gather(st, b, TILE, x, z, gamma, gamma_s, v, x_r, u, r)
             period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, TILE)
-            _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r)
+            _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka)
             b += TILE
     if hi - b >= MIN_TILE:
         nl = hi - b
         st, wk = _scratch_tile(ka, nl)
         _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
         period_tile_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl)
-        _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r)
+        _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka)
         b = hi
     if hi > b:
         sc = _scratch_copy(ka)
@@ -528,6 +636,7 @@ def flops_per_period(p, *, dense: bool = False) -> int:
            + 3 * N  # sqrt, division, gain
            + 2 * N * n + 2 * EE + 2 * FF + 2 * N * n  # z update: bu - coef w, Ebar z, Fbar y, Euler step
            + 8 * N  # adaptive gains
+           + 5 * N  # stability test (_crit) and its comparison
            + 2 * AA + 2 * BV + 2 * n  # plant
            + (2 * AR + 2 * n if p.has_reference else 0)  # reference model
            + 2 * PV)  # exosystem
