@@ -14,11 +14,13 @@
    controller, the full-state oracle, the no-communication decentralised controller
    and zero input -- on the *same* ``K`` episodes of the task's own environment
    (reset with seeds ``eval_seed + k``, recorded with each episode's ``x(0)``).
-3. **Aggregate** as rliable defines it (:mod:`agents.stats`): per (training seed,
-   episode) the cost ratio ``J_policy / J_paper`` on the same episode (< 1: cheaper
-   than the paper's controller), its interquartile mean (IQM) and stratified-bootstrap
-   95 % CI over training seeds; next to it the transient cost (first 2 s), the
-   steady-state error (RMS of the task error over the last 5 s) and the failure rate.
+3. **Aggregate** as rliable defines it, with the training run as the unit (:mod:`agents.stats`):
+   a run's score is the mean over the episodes of the cost ratio ``J_policy / J_paper`` on the
+   same episode (< 1: cheaper than the paper's controller); the IQM and the mean of the run
+   scores with 95 % percentile-bootstrap CIs that resample whole runs, the probability of
+   improvement ``P(J < J_paper)`` over matched (run, episode) pairs, and the transient cost
+   (first 2 s), the steady-state error (RMS of the task error over the last 5 s) and the
+   failure rate; each row states its budget and the information its policy acts on.
 4. **Write** ``<out>/<env>/results.{json,csv}``, ``error_norms.png``,
    ``learning_curves.png`` and ``<out>/summary.{json,png}`` (every env's cost ratios
    with their CIs).

@@ -5,8 +5,8 @@ steps (and at the end of training), evaluates the *current* deterministic policy
 task's own environment (not the training env: a recipe's training-only options do not
 apply) over ``len(seeds)`` seeded episodes and records ``J_policy / J_paper`` per
 episode, the paper controller's cost on the same seeds being computed once.
-The benchmark aggregates the curves of all training seeds (IQM and stratified
-bootstrap CI at each point, :mod:`agents.stats`).
+The benchmark aggregates the curves over training runs (at each point a run's score is the mean
+of its cost ratios; IQM and a CI resampling whole runs, :mod:`agents.stats`).
 """
 from __future__ import annotations
 
