@@ -53,7 +53,8 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=_seed, default=TUNING.start,
                    help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "
                         f"model selection; the {EVALUATION} holds the benchmark's evaluation episodes)")
-    p.add_argument("--json", default=None, help="also write the summary to this file")
+    p.add_argument("--json", default=None, help="also write the summary to this file (a new file; see --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept a run whose config.json names 'package.module:factory' (imports that code; "
                         "model.zip and vecnormalize.pkl are pickles: load only runs you trust)")
@@ -282,6 +283,8 @@ def _evaluate(args) -> int:
             _usage_error(f"--json {args.json!r} is a directory; give a file name, e.g. {os.path.join(args.json, 'eval.json')}")
         if not os.path.isdir(d):
             _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
+        if os.path.exists(args.json) and not args.overwrite:
+            _usage_error(f"--json {args.json!r} already exists; pass --overwrite to replace it, or choose another file")
     try:
         summ = evaluate_model(args.model, args.episodes, args.seed, allow_custom_env=args.allow_custom_env)
     except (RunDirError, EnvNameError) as exc:
@@ -289,9 +292,10 @@ def _evaluate(args) -> int:
     for k, v in summ.items():
         if k != "seeds":
             print(f"{k:34s} {v}")
-    if args.json:
-        with open(args.json, "w") as fh:
+    if args.json:  # atomic: an interrupted write never leaves a half-written file under the user's name
+        with open(args.json + ".tmp", "w") as fh:
             json.dump(summ, fh, indent=2)
+        os.replace(args.json + ".tmp", args.json)
     return 0
 
 

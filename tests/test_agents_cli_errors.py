@@ -71,6 +71,18 @@ def test_evaluate_json_into_missing_directory(run_dir, tmp_path, capsys):
     assert "--json" in err
 
 
+def test_evaluate_json_never_overwrites_without_the_flag(run_dir, tmp_path, capsys):
+    """The user's file is kept unless --overwrite says otherwise; with it the summary replaces it."""
+    js = tmp_path / "e.json"
+    js.write_text("the user's notes")
+    err = _exit2(["evaluate", "--model", run_dir, "--episodes", "1", "--json", str(js)], capsys)
+    assert "--json" in err and "already exists" in err and "--overwrite" in err
+    assert js.read_text() == "the user's notes"
+    assert main(["evaluate", "--model", run_dir, "--episodes", "1", "--json", str(js), "--overwrite"]) == 0
+    assert json.load(open(js))["episodes"] == 1
+    assert sorted(os.listdir(tmp_path)) == ["e.json"]  # no temporary file left
+
+
 @pytest.mark.parametrize("argv,needle", [
     (["--env", "CartPol-v9"], "unknown --env"),
     (["--env", "os:system"], "--allow-custom-env"),
