@@ -231,7 +231,7 @@ def _training_overrides(spec: dict) -> dict:
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
     (``training_only``: see :func:`_finished_run`)."""
-    from .train import resolve_recipe
+    from .recipes import resolve_recipe
 
     a = AGENTS[spec["agent"]]
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
@@ -264,7 +264,7 @@ def _stored_model(spec: dict) -> dict | None:
 
 def _evaluate_and_record(spec: dict, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``spec['path']`` on the spec's episodes and write ``result.json`` (atomically)."""
-    from .train import load_agent
+    from .loading import load_agent
 
     a = AGENTS[spec["agent"]]
     agent = load_agent(spec["path"])

@@ -134,7 +134,8 @@ _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_age
 
 def _interrupted(out: str, exc: KeyboardInterrupt) -> None:
     """One line on stderr after Ctrl-C, exit status 130 (128 + SIGINT)."""
-    from .train import RunDirError, TrainingInterrupted, resume_point
+    from .runs import RunDirError, resume_point
+    from .train import TrainingInterrupted
 
     if isinstance(exc, TrainingInterrupted):
         msg = (f"interrupted after {exc.timesteps_done} of {exc.timesteps} env steps; model, normaliser and config "
@@ -162,7 +163,8 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 
 def _train(args) -> int:
     from .config import EnvNameError, HyperparamsError, check_env_name
-    from .train import default_run_dir, train
+    from .runs import default_run_dir
+    from .train import train
 
     if args.resume is not None:
         return _resume(args)
@@ -207,7 +209,7 @@ def _train(args) -> int:
 def _occupied_run_dir(out: str) -> str:
     """Why ``train --out`` refuses the non-empty directory ``out``: a run (its status, resumable or not)
     or other files (named), and the ways out."""
-    from .train import RunDirError, read_run_config, resume_point
+    from .runs import RunDirError, read_run_config, resume_point
 
     if os.path.isfile(os.path.join(out, "config.json")):
         try:
@@ -232,7 +234,8 @@ def _occupied_run_dir(out: str) -> str:
 def _resume(args) -> int:
     """``train --resume DIR``: the run's own configuration; options that define a run must agree with it."""
     from .config import EnvNameError, env_key
-    from .train import RunDirError, read_run_config, resume, resume_point
+    from .runs import RunDirError, read_run_config, resume_point
+    from .train import resume
 
     run = args.resume
     if args.overwrite:
@@ -275,7 +278,7 @@ def _resume(args) -> int:
 def _evaluate(args) -> int:
     from .config import EnvNameError
     from .evaluate import evaluate_model
-    from .train import RunDirError
+    from .runs import RunDirError
 
     if args.json:
         d = os.path.dirname(os.path.abspath(args.json))

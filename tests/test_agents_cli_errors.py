@@ -47,7 +47,7 @@ def test_run_directory_cannot_make_us_import_code(run_dir, tmp_path, capsys, mon
     assert not marker.exists() and "evil_dobs_module" not in sys.modules
 
 
-@pytest.mark.parametrize("case", ["missing", "no_model", "corrupt_json", "not_a_dict", "bad_algo"])
+@pytest.mark.parametrize("case", ["missing", "no_model", "corrupt_json", "not_a_dict", "bad_algo", "other_library"])
 def test_evaluate_bad_run_directories(case, run_dir, tmp_path, capsys):
     d = tmp_path / "r"
     if case != "missing":
@@ -62,8 +62,14 @@ def test_evaluate_bad_run_directories(case, run_dir, tmp_path, capsys):
         cfg = json.load(open(d / "config.json"))
         cfg["algo"] = "dqn"
         json.dump(cfg, open(d / "config.json", "w"))
+    elif case == "other_library":  # a model of another implementation is never loaded by ours
+        cfg = json.load(open(d / "config.json"))
+        cfg["library"] = "sbx-rl"
+        json.dump(cfg, open(d / "config.json", "w"))
     err = _exit2(["evaluate", "--model", str(d)], capsys)
     assert "--model" in err
+    if case == "other_library":
+        assert "trained with 'sbx-rl'" in err
 
 
 def test_evaluate_json_into_missing_directory(run_dir, tmp_path, capsys):

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from agents.benchmark import BUDGETS
-from agents.train import RunDirError, read_run_config, resume, resume_point
+from agents.runs import RunDirError, read_run_config, resume_point
+from agents.train import resume
 from dobs_envs.cli import main
 
 TINY_PPO = BUDGETS["tiny"]["hyperparams"]["ppo"]

@@ -11,7 +11,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 import dobs_envs  # noqa: F401
 from agents.core_vec_env import CoreVecEnv
-from agents.train import build_vec_env, core_of
+from agents.training_envs import build_vec_env, core_of
 from agents.vec_env import ParallelVecEnv
 from dobs_envs import hetero_mas_v0, tracking_v0
 from dobs_envs.envs import HeteroMASEnv, TrackingEnv
