@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
 import time
 
-from .benchmark import AGENTS, BUDGETS
+from .bench_exec import BACKENDS
+from .bench_plan import AGENTS, BUDGETS
 from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
 from .config import ALGOS, ENVS
 
@@ -67,8 +69,16 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="runs/benchmark")
     p.add_argument("--seed", type=_seed, default=0, help="first training seed (seeds seed, seed+1, ...)")
     p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
+    p.add_argument("--backend", choices=BACKENDS, default="process",
+                   help="where runs train: process (default: --workers processes on this machine), serial (one after "
+                        "another in this process) or ray (Ray tasks; needs the distributed extra)")
+    p.add_argument("--address", default=None, metavar="ADDR",
+                   help="with --backend ray: join the Ray cluster at ADDR (host:port, ray://host:port, or auto: the "
+                        "cluster `ray start` runs on this machine); without it a local Ray sized to the machine "
+                        "(or to --workers) is started and shut down afterwards")
     p.add_argument("--workers", type=_positive_int, default=None,
-                   help="parallel training processes (default: the number of CPU cores)")
+                   help="parallel training processes (process backend) or CPUs of the local Ray (default: the number "
+                        "of CPU cores)")
     p.add_argument("--eval-seed", type=_seed, default=EVALUATION.start,
                    help=f"episode k of every policy is reset with eval_seed + k (inside the {EVALUATION})")
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
@@ -303,6 +313,7 @@ def _evaluate(args) -> int:
 
 
 def _benchmark(args) -> int:
+    from .bench_exec import RAY_EXTRA
     from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
     t0 = time.perf_counter()
@@ -316,6 +327,15 @@ def _benchmark(args) -> int:
             _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}")
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         _usage_error(f"--out {args.out!r} is a file, not a directory")
+    if args.address is not None and args.backend != "ray":
+        _usage_error(f"--address names a Ray cluster: it needs --backend ray (got --backend {args.backend})")
+    if args.address is not None and not args.address.strip():
+        _usage_error("--address '': expected a Ray address (host:port, ray://host:port or auto)")
+    if args.address is not None and args.workers is not None:
+        _usage_error("--workers sizes the local Ray the benchmark starts; a cluster given by --address has its own "
+                     "size: give one of them")
+    if args.backend == "ray" and not args.dry_run and importlib.util.find_spec("ray") is None:
+        _usage_error(f"--backend ray needs Ray: {RAY_EXTRA}")
     foreign = foreign_entries(args.out)
     if foreign and not args.overwrite:
         _usage_error(f"--out {OutDirError(args.out, foreign)}")
@@ -329,7 +349,8 @@ def _benchmark(args) -> int:
     try:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
-                             workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite)
+                             workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite,
+                             backend=args.backend, address=args.address)
     except OutDirError as exc:  # the directory changed since the check above
         _usage_error(f"--out {exc}")
     except RunConflictError as exc:

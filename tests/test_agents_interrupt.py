@@ -280,20 +280,25 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _scratch_runs(tmp: str) -> list[str]:
+    """Run directories the benchmark's workers train in (``<TMPDIR>/dobs-envs-bench-*/run-*``)."""
+    return [os.path.join(r, d) for r, ds, _ in os.walk(tmp) for d in ds
+            if d.startswith("run-") and os.path.exists(os.path.join(r, d, "config.json"))]
+
+
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="reads worker pids from /proc")
 def test_benchmark_sigint_is_clean_and_terminates_workers(tmp_path):
+    """Ctrl-C during training: exit 130 with one line, every worker ended, the workers' scratch
+    directory removed, nothing half-written in --out (a run's files are written by the driver once
+    the run has finished)."""
     out = str(tmp_path / "bench")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
     # its own process group, signalled as a terminal's Ctrl-C signals the foreground group (workers included)
     proc = subprocess.Popen(_cli("benchmark", "--env", "tracking", "--budget", "tiny", "--out", out, "--workers", "2",
                                  "--no-progress"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, preexec_fn=_sigint_default)
-    models = os.path.join(out, "models", "tracking", "tiny")
-
-    def training_started():
-        return os.path.isdir(models) and any(os.path.exists(os.path.join(r, "config.json"))
-                                             for r, _, _ in os.walk(models))
-
-    _wait_for(training_started, proc)
+                            start_new_session=True, preexec_fn=_sigint_default, env={**os.environ, "TMPDIR": str(tmp)})
+    _wait_for(lambda: _scratch_runs(str(tmp)), proc)  # a worker is training
     workers = _children(proc.pid)
     assert len(workers) >= 2  # the spawn workers (and multiprocessing's resource tracker)
     os.killpg(proc.pid, signal.SIGINT)
@@ -302,6 +307,11 @@ def test_benchmark_sigint_is_clean_and_terminates_workers(tmp_path):
     assert "benchmark interrupted" in _one_line(stderr)
     time.sleep(0.5)
     assert not [w for w in workers if _alive(w)]
+    assert not [d for d in os.listdir(tmp) if d.startswith("dobs-envs-bench-")]  # (torch leaves its own cache there)
+    models = os.path.join(out, "models")
+    for r, _, files in os.walk(models):
+        assert not [f for f in files if f.endswith(".tmp")]
+        assert not files or "result.json" in files, (r, files)  # only finished runs
 
 
 def test_overwrite_removes_the_previous_runs_files(tmp_path, capsys):

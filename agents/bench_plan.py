@@ -1,0 +1,290 @@
+"""Benchmark planning: the agent and budget tables, the runs an invocation trains
+(:func:`plan_runs`) and what a stored run in ``<out>/models`` already answers
+(:func:`stored_answer`, :func:`pending_runs`, :func:`reevaluated_runs`, :func:`replaced_runs`).
+
+Nothing here trains or writes: the execution backends (:mod:`agents.bench_exec`) run the
+work units of :mod:`agents.bench_tasks`, the driver (:func:`agents.benchmark.run_benchmark`)
+writes the records they return (:mod:`agents.bench_store`).
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+from .config import ENVS
+from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+
+__all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
+           "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
+           "TRAINING_KEYS"]
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """A benchmark agent: algorithm, parameter sharing, hybrid kind, label, extra training env options."""
+
+    algo: str
+    multi_agent: bool
+    hybrid: str | None
+    label: str
+    train_env_kwargs: tuple = ()
+
+    @property
+    def kind(self) -> str:
+        return "hybrid" if self.hybrid else "RL"
+
+    @property
+    def information(self) -> str:
+        """What the agent observes (the table's information column)."""
+        return INFO_OWN_NODE if self.multi_agent else INFO_POOLED
+
+
+AGENTS = {
+    "ppo": AgentSpec("ppo", False, None, "PPO (centralised)"),
+    "ppo_ma": AgentSpec("ppo", True, None, "PPO (shared, per node)"),
+    "sac": AgentSpec("sac", False, None, "SAC (centralised)"),
+    "td3": AgentSpec("td3", False, None, "TD3 (centralised)"),
+    "sac_ma": AgentSpec("sac", True, None, "SAC (shared, per node)"),
+    "ppo_log": AgentSpec("ppo", False, None, "PPO (centralised, log-cost training)", (("reward", "log"),)),
+    "ppo_sqrt": AgentSpec("ppo", False, None, "PPO (centralised, sqrt-cost training)", (("reward", "sqrt"),)),
+    "ppo_res": AgentSpec("ppo", False, "residual", "residual PPO (centralised) [hybrid]"),
+    "ppo_res_ma": AgentSpec("ppo", True, "residual", "residual PPO (shared) [hybrid]"),
+    "ppo_bc": AgentSpec("ppo", False, "bc", "BC-warm-started PPO (centralised) [hybrid]"),
+}
+
+BUDGETS = {
+    "tiny": {
+        "episodes": 2, "seeds": 2, "env_kwargs": {"max_cycles": 20}, "curve_points": 2, "curve_episodes": 1,
+        "agents": {"ppo": 256, "ppo_ma": 128, "ppo_res": 128, "ppo_bc": 128},
+        "hyperparams": {
+            "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "bc": {"episodes": 1, "epochs": 1}},
+            "sac": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+        },
+    },
+    "quick": {
+        "episodes": 10, "seeds": 3, "env_kwargs": {}, "curve_points": 6, "curve_episodes": 3,
+        "agents": {"ppo": 400_000, "ppo_ma": 120_000, "ppo_res": 150_000, "ppo_bc": 150_000},
+        "hyperparams": {},
+    },
+    "full": {
+        "episodes": 20, "seeds": 10, "env_kwargs": {}, "curve_points": 10, "curve_episodes": 5,
+        # sac_ma (SAC per node: 5 samples and gradient steps per env step, ~50 env steps/s) and
+        # ppo_log (J/J_paper 21x and 67x at 400k on tracking) are available through --agents
+        "agents": {"ppo": 600_000, "ppo_ma": 300_000, "ppo_sqrt": 600_000, "sac": 50_000, "td3": 50_000,
+                   "ppo_res": 300_000, "ppo_res_ma": 150_000, "ppo_bc": 300_000},
+        "hyperparams": {},
+    },
+}
+
+#: the information columns (what a policy observes)
+INFO_POOLED = "pooled: every node's obs"
+INFO_OWN_NODE = "own node + neighbours"
+ANALYTIC_INFO = {"paper (separation)": "own observer's estimate",
+                 "Kalman on pooled obs + paper law": INFO_POOLED,
+                 "LQG on pooled obs (task's Q, R)": INFO_POOLED,
+                 "oracle (full state)": "full state (privileged)",
+                 "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
+ANALYTIC = tuple(ANALYTIC_INFO)
+PAPER = ANALYTIC[0]
+CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/seeds.py)
+
+
+# ---------------------------------------------------------------------- what a stored run answers
+def _run_signature(spec: dict) -> dict:
+    return {k: spec[k] for k in ("env", "agent", "seed", "steps", "hp", "env_kwargs", "eval_seeds", "curve_seeds",
+                                 "curve_every")}
+
+
+TRAINING_KEYS = ("env", "agent", "seed", "steps", "hp", "env_kwargs", "curve_seeds", "curve_every")
+"""The part of a run's signature that defines its training (the rest, ``eval_seeds``, its evaluation)."""
+
+
+def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: bool = False) -> dict | None:
+    """The stored result of the run in ``path`` if it finished with this signature *and* was trained
+    with these merged hyperparameters (its ``config.json``): editing a recipe file retrains the
+    affected runs instead of reusing results of the old recipe. None otherwise.
+
+    ``training_only``: compare only the signature's :data:`TRAINING_KEYS` (the run was trained as
+    ``sig`` asks, perhaps evaluated on other episodes)."""
+    try:
+        with open(os.path.join(path, "result.json")) as fh:
+            prev = json.load(fh)
+        with open(os.path.join(path, "config.json")) as fh:
+            trained_with = json.load(fh).get("hyperparams")
+    except (OSError, ValueError):
+        return None
+    old = prev.get("signature")
+    if not isinstance(old, dict) or trained_with != json.loads(json.dumps(hyperparams)):
+        return None
+    keys = TRAINING_KEYS if training_only else tuple(sig)
+    if set(old) != set(sig) or any(old[k] != sig[k] for k in keys):
+        return None
+    prev["cached"] = True
+    return prev
+
+
+def _training_overrides(spec: dict) -> dict:
+    """The budget's hyperparameter overrides of a run plus its agent's training-only env options."""
+    a = AGENTS[spec["agent"]]
+    hp = dict(spec["hp"])
+    if a.train_env_kwargs:
+        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
+    return hp
+
+
+def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
+    """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
+    (``training_only``: see :func:`_finished_run`)."""
+    from .recipes import resolve_recipe
+
+    a = AGENTS[spec["agent"]]
+    recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
+                            overrides=_training_overrides(spec) or None)
+    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only)
+
+
+def _stored_model(spec: dict) -> dict | None:
+    """The stored result of a run trained exactly as ``spec`` asks but evaluated on other episodes,
+    if its model is kept (``model.zip``, and ``vecnormalize.pkl`` when it normalises): the benchmark
+    evaluates that model again instead of training it again. None otherwise."""
+    import zipfile
+
+    prev = _stored_result(spec, training_only=True)
+    if prev is None or prev["signature"] == _run_signature(spec):
+        return None
+    path = spec["path"]
+    try:
+        with open(os.path.join(path, "config.json")) as fh:
+            normalize = bool(json.load(fh).get("normalize"))
+    except (OSError, ValueError):
+        return None
+    model = os.path.join(path, "model.zip")
+    if not (os.path.isfile(model) and zipfile.is_zipfile(model)):
+        return None
+    if normalize and not os.path.isfile(os.path.join(path, "vecnormalize.pkl")):
+        return None
+    return prev
+
+
+#: what :func:`stored_answer` says of a run: reuse its stored result, evaluate its kept model again, train it
+REUSE, REEVALUATE, TRAIN = "reuse", "reevaluate", "train"
+
+
+def stored_answer(spec: dict) -> tuple[str, dict | None]:
+    """What the stored run in ``spec['path']`` answers: ``(REUSE, result)`` (finished with this signature
+    and today's recipe), ``(REEVALUATE, result)`` (trained as asked, its model kept, evaluated on other
+    episodes: :func:`_stored_model`) or ``(TRAIN, None)``."""
+    prev = _stored_result(spec)
+    if prev is not None:
+        return REUSE, prev
+    prev = _stored_model(spec)
+    if prev is not None:
+        return REEVALUATE, prev
+    return TRAIN, None
+
+
+# ---------------------------------------------------------------------- the runs of an invocation
+def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None) -> tuple[dict, int]:
+    B = BUDGETS[budget]
+    plan = dict(B["agents"])
+    if agents is not None:
+        unknown = sorted(set(agents) - set(AGENTS))
+        if unknown:
+            raise ValueError(f"unknown agents {unknown}; choose from {sorted(AGENTS)}")
+        default = max(B["agents"].values())
+        plan = {k: plan.get(k, default) for k in agents}
+    if timesteps is not None:
+        if timesteps < 1:
+            raise ValueError(f"timesteps must be >= 1, got {timesteps}")
+        plan = {k: int(timesteps) for k in plan}
+    n_seeds = int(seeds if seeds is not None else B["seeds"])
+    if n_seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    return plan, n_seeds
+
+
+@dataclass(frozen=True)
+class BenchmarkPlan:
+    """What a benchmark invocation trains and evaluates (:func:`plan_runs`).
+
+    ``specs`` holds one training run per (env, agent, training seed), longest first; a run's
+    ``path`` is ``<out>/models/<env>/<budget>/<agent>/s<seed>``.
+    """
+
+    envs: list
+    budget: str
+    steps: dict
+    training_seeds: list
+    eval_seeds: list
+    curve_seeds: list
+    env_kwargs: dict
+    specs: list
+
+
+def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
+              eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
+              agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1) -> BenchmarkPlan:
+    """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
+    written). With :func:`pending_runs` it tells which of them a stored result already answers."""
+    if budget not in BUDGETS:
+        raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
+    env_names = list(ENVS) if env == "all" else [env]
+    for e in env_names:
+        if e not in ENVS:
+            raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
+    B = BUDGETS[budget]
+    plan, n_seeds = _plan(budget, agents, timesteps, seeds)
+    episodes = int(episodes or B["episodes"])
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    # the three seed ranges (agents/seeds.py): training seeds, evaluation episodes, tuning episodes
+    check_training_seeds(seed, n_seeds, name="seed")
+    eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
+    curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
+    env_kwargs = dict(B["env_kwargs"])
+    specs = []
+    for e in env_names:
+        for key, steps in plan.items():
+            a = AGENTS[key]
+            hp = dict(B["hyperparams"].get(a.algo, {}))
+            for s in range(seed, seed + n_seeds):
+                specs.append({"env": e, "agent": key, "seed": s, "steps": int(steps), "hp": hp,
+                              "env_kwargs": env_kwargs, "eval_seeds": eval_seeds, "curve_seeds": curve_seeds,
+                              "curve_every": max(1, int(steps) // B["curve_points"]), "threads": threads,
+                              "path": os.path.join(out, "models", e, budget, key, f"s{s}")})
+    # longest jobs first: better packing on the workers
+    specs.sort(key=lambda sp: -sp["steps"] * (5 if AGENTS[sp["agent"]].multi_agent else 1))
+    return BenchmarkPlan(env_names, budget, plan, list(range(seed, seed + n_seeds)), eval_seeds, curve_seeds,
+                         env_kwargs, specs)
+
+
+class RunConflictError(ValueError):
+    """Training would replace finished runs of another configuration (``paths``; pass ``overwrite=True``)."""
+
+    def __init__(self, out: str, paths: list[str]):
+        self.out, self.paths = out, list(paths)
+        super().__init__(f"{len(self.paths)} finished run(s) in {os.path.join(out, 'models')} were made with another "
+                         f"configuration or recipe (first: {self.paths[0]}); training would replace them: pass "
+                         f"overwrite=True or choose another out")
+
+
+def replaced_runs(pending: list[dict]) -> list[dict]:
+    """The specs among ``pending`` whose directory holds a finished result of another configuration
+    or recipe: training them replaces that run."""
+    return [sp for sp in pending if os.path.exists(os.path.join(sp["path"], "result.json"))]
+
+
+def pending_runs(plan: BenchmarkPlan) -> list[dict]:
+    """The specs of ``plan`` that would train: those without a finished result of the same signature
+    and recipe (:func:`_finished_run`) and without a kept model trained as asked
+    (:func:`reevaluated_runs`). ``[]`` means the benchmark trains nothing."""
+    return [sp for sp in plan.specs if stored_answer(sp)[0] == TRAIN]
+
+
+def reevaluated_runs(plan: BenchmarkPlan) -> list[dict]:
+    """The specs of ``plan`` whose kept model was trained as asked but evaluated on other episodes
+    (another ``eval_seed`` or ``episodes``): the benchmark evaluates it again, without training."""
+    return [sp for sp in plan.specs if stored_answer(sp)[0] == REEVALUATE]
+
+

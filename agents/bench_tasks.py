@@ -1,0 +1,131 @@
+"""The benchmark's work units, run by an execution backend (:mod:`agents.bench_exec`) in a worker:
+train and evaluate one (env, agent, seed) run (:func:`train_and_evaluate`), evaluate a kept model
+again on other episodes (:func:`reevaluate`), evaluate the analytic controllers of one env
+(:func:`analytic_results`).
+
+A worker needs no file system shared with the driver: it trains in a scratch directory of its own
+machine (``scratch``: the directory to make it in, ``None`` for the system's temporary directory),
+removes it, and returns the run *record* ``{"result": dict, "files": {name: bytes},
+"reevaluated": bool}``; the driver writes it (:func:`agents.bench_store.write_record`). What a run
+computes does not depend on where it runs: the same spec gives the same record on every backend.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+import numpy as np
+
+from .bench_plan import AGENTS, ANALYTIC, _run_signature, _training_overrides
+from .bench_store import RECORD_FILES, read_run_files
+from .config import gym_factory, parallel_factory
+from .evaluate import evaluate_policy
+
+__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "compile_kernels", "mean_trajectory"]
+
+
+def mean_trajectory(series) -> np.ndarray:
+    """Mean over episodes of per-step series; a shorter one (an episode that ended early) is padded
+    with its last value."""
+    arrs = [np.asarray(x, dtype=np.float64) for x in series]
+    L = max(len(a) for a in arrs)
+    return np.mean([np.concatenate([a, np.full(L - len(a), a[-1])]) if len(a) < L else a for a in arrs], axis=0)
+
+
+def _episode_payload(res) -> dict:
+    """What a run keeps of its evaluation: every episode's metrics and, for the error-norm figure, the
+    task and estimation errors averaged over the episodes (``result.json`` of a full-budget run: ~45 kB
+    instead of ~500 kB with every episode's trajectories)."""
+    return {"episodes": [r.as_dict() for r in res],
+            "t": max(res, key=lambda r: len(r.t)).t.tolist() if res else [],
+            "tracking_error_mean": mean_trajectory([r.tracking_error for r in res]).tolist() if res else [],
+            "estimation_error_mean": mean_trajectory([r.estimation_error for r in res]).tolist() if res else []}
+
+
+def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
+    """Evaluate the model in ``run_dir`` on the spec's episodes: the run's ``result.json`` document."""
+    from .loading import load_agent
+
+    a = AGENTS[spec["agent"]]
+    agent = load_agent(run_dir)
+    eval_env = (parallel_factory if a.multi_agent else gym_factory)(spec["env"], spec["env_kwargs"])()
+    res = evaluate_policy(eval_env, agent.policy_for(eval_env), len(spec["eval_seeds"]), spec["eval_seeds"][0],
+                          parallel=a.multi_agent)
+    eval_env.close()
+    return {"signature": _run_signature(spec), "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
+            "curve": curve, **_episode_payload(res), "cached": False}
+
+
+def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
+    """Train one (env, agent, seed) run as ``spec`` asks (:func:`agents.bench_plan.plan_runs`), in a
+    scratch directory, and evaluate it: the run's record with its files (:data:`RECORD_FILES`)."""
+    from .curves import make_curve_callback
+    from .train import set_threads, train
+
+    set_threads(spec["threads"])
+    a = AGENTS[spec["agent"]]
+    env, env_kwargs = spec["env"], spec["env_kwargs"]
+    with tempfile.TemporaryDirectory(prefix="run-", dir=scratch) as path:
+        n_agents = len(parallel_factory(env, env_kwargs)().possible_agents) if a.multi_agent else 1
+        curve = make_curve_callback(env, env_kwargs, spec["curve_seeds"], spec["curve_every"], n_agents=n_agents,
+                                    path=os.path.join(path, "curve.json"))
+        t0 = time.perf_counter()
+        train(env, a.algo, multi_agent=a.multi_agent, timesteps=spec["steps"], seed=spec["seed"], out=path,
+              progress=False, hyperparams=_training_overrides(spec) or None, env_kwargs=env_kwargs, hybrid=a.hybrid,
+              callbacks=[curve], checkpoint_freq=0)
+        result = _evaluate(spec, path, time.perf_counter() - t0, curve.points)
+        return {"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False}
+
+
+def reevaluate(spec: dict, files: dict, previous: dict, scratch: str | None = None) -> dict:
+    """Evaluate a kept model (``files``: its ``config.json``, ``model.zip`` and ``vecnormalize.pkl`` as
+    bytes) on the episodes of ``spec``; ``previous``: its stored result (training time and learning
+    curve are kept). The record holds no files: the run's own stay as they are."""
+    from .train import set_threads
+
+    set_threads(spec["threads"])
+    with tempfile.TemporaryDirectory(prefix="run-", dir=scratch) as path:
+        for name, data in files.items():
+            with open(os.path.join(path, os.path.basename(name)), "wb") as fh:
+                fh.write(data)
+        result = _evaluate(spec, path, previous["train_seconds"], previous["curve"])
+    return {"result": result, "files": {}, "reevaluated": True}
+
+
+# ---------------------------------------------------------------------- analytic controllers
+def _analytic_policies(penv) -> list:
+    """The analytic controllers in :data:`ANALYTIC` order, built on the parallel env ``penv``:
+    the paper's separation controller; the same law on a Kalman estimate from the centralised
+    agent's information (every node's observation pooled) and the LQ-optimal controller for the
+    task's own cost on that information (:mod:`baselines.pooled`); the full-state oracle, the
+    decentralised controller and zero input (:mod:`baselines.references`)."""
+    from baselines.policies import SeparationPolicy
+    from baselines.pooled import PooledKalmanPolicy, PooledLQGPolicy
+    from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
+
+    return [cls(penv) for cls in (SeparationPolicy, PooledKalmanPolicy, PooledLQGPolicy, OraclePolicy,
+                                  DecentralizedPolicy, ZeroInputPolicy)]
+
+
+def analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
+    """Every analytic controller's evaluation payload on ``env``'s episodes ``eval_seed + k``, by label."""
+    penv = parallel_factory(env, env_kwargs)()
+    out = {label: _episode_payload(evaluate_policy(penv, pol, episodes, eval_seed, parallel=True))
+           for label, pol in zip(ANALYTIC, _analytic_policies(penv))}
+    penv.close()
+    return out
+
+
+def compile_kernels(env_names: list[str], env_kwargs: dict) -> None:
+    """Compile (or load from numba's on-disk cache) the compiled steps every worker needs, once, in
+    this process before the workers start: on a cold cache (a fresh install) each worker would
+    otherwise compile the same kernels concurrently (measured on 2 cores, the tiny budget: 195 s
+    cold against 14 s warm with the workers compiling; one compilation takes ~90 s)."""
+    from baselines.policies import SeparationPolicy
+
+    for e in env_names:
+        penv = parallel_factory(e, env_kwargs)()
+        obs, _ = penv.reset(seed=0)
+        penv.step(SeparationPolicy(penv)(obs))
+        penv.close()
