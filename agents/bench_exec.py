@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator
 
 __all__ = ["BACKENDS", "Job", "Backend", "SerialBackend", "ProcessBackend", "RayBackend", "make_backend",
-           "default_workers"]
+           "check_address", "default_workers"]
 
 BACKENDS = ("serial", "process", "ray")
 #: the install hint of the ray backend's missing dependency
@@ -167,6 +167,24 @@ class ProcessBackend(_LocalScratch):
         return super().__exit__(exc_type, exc, tb)
 
 
+def check_address(address: str, timeout: float = 5.0) -> None:
+    """Raise ``ConnectionError`` at once when ``address`` is ``host:port`` and nothing listens there
+    (Ray itself would retry for minutes); ``auto`` and ``ray://`` addresses are left to Ray."""
+    import socket
+
+    if address == "auto" or "://" in address:
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise ValueError(f"address {address!r}: expected host:port, ray://host:port or auto")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise ConnectionError(f"no Ray cluster answers at {address} ({exc.strerror or exc}); start one with "
+                              f"`ray start --head --port {port}` or check the address") from None
+
+
 def _call(fn, args, kw):
     """The Ray task: ``fn(*args, **kw)`` in a Ray worker."""
     return fn(*args, **kw)
@@ -187,6 +205,8 @@ class RayBackend(Backend):
         if address is not None and workers is not None:
             raise ValueError("workers sizes the local Ray the benchmark starts; a cluster given by address has its own "
                              "size: give one of them")
+        if address is not None:
+            check_address(address)
         self.address, self.workers, self.init_kwargs = address, workers, init_kwargs
         self._owned = False
         self._pending: list = []

@@ -339,6 +339,13 @@ def _benchmark(args) -> int:
     foreign = foreign_entries(args.out)
     if foreign and not args.overwrite:
         _usage_error(f"--out {OutDirError(args.out, foreign)}")
+    if args.address is not None and not args.dry_run:
+        from .bench_exec import check_address
+
+        try:
+            check_address(args.address)
+        except (ValueError, ConnectionError) as exc:
+            _usage_error(f"--address: {exc}")
     try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                          episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds)
@@ -353,6 +360,8 @@ def _benchmark(args) -> int:
                              backend=args.backend, address=args.address)
     except OutDirError as exc:  # the directory changed since the check above
         _usage_error(f"--out {exc}")
+    except ConnectionError as exc:  # --address: no Ray cluster there
+        _usage_error(f"--address {args.address}: {exc}")
     except RunConflictError as exc:
         _usage_error(f"--out {args.out!r}: {len(exc.paths)} finished run(s) were made with another configuration "
                      f"or recipe (first: {exc.paths[0]}); pass --overwrite to retrain them or choose another --out")

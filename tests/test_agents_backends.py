@@ -289,6 +289,19 @@ def test_backend_usage_errors_exit_2(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_an_address_where_no_cluster_answers_is_a_usage_error(tmp_path, capsys):
+    """Ray would retry for minutes; the benchmark says at once that nothing answers there."""
+    _ray()
+    out = tmp_path / "out"
+    address = f"127.0.0.1:{_free_port()}"
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--out", str(out), "--backend", "ray", "--address", address, *ARGV])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"no Ray cluster answers at {address}" in err
+    assert not out.exists()
+
+
 def test_backend_api_errors_are_named(tmp_path):
     from agents.bench_exec import make_backend
 
