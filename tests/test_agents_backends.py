@@ -77,6 +77,7 @@ def local_ray():
     ray.shutdown()
 
 
+@pytest.mark.slow
 def test_process_backend_gives_the_serial_numbers(serial_run, tmp_path):
     out = str(tmp_path)
     summ = run_benchmark("tracking", "tiny", out, backend="process", workers=2, progress=False, **GRID)
@@ -158,6 +159,7 @@ def _env() -> dict:
             "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 
 
+@pytest.mark.slow
 def test_cluster_head_joined_with_address(serial_run, tmp_path):
     """``ray start --head`` (a cluster of one node), the CLI joins it with ``--address``: one run trains
     on the cluster, the others are reused, and the numbers are the serial backend's. The head is
@@ -226,6 +228,7 @@ def _alive(pid: int) -> bool:
         return False
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="reads process trees from /proc")
 def test_ctrl_c_shuts_the_local_ray_down_and_keeps_finished_runs(tmp_path):
     """SIGINT to the benchmark's process group (a terminal's Ctrl-C) once a run has finished and others
