@@ -280,11 +280,15 @@ def _trial(config: dict, spec: StudySpec) -> None:
                                 path=os.path.join(trial_dir, "curve.json"))
 
     class _Report(BaseCallback):
+        """Reports the curve's points as they come, except those at the full budget: they go after
+        ``train`` has saved the run (the scheduler ends a trial that reports ``max_t``)."""
         sent = 0
 
-        def _send(self):
+        def _send(self, final: bool = False):
             while self.sent < len(curve.points):
                 pt = curve.points[self.sent]
+                if not final and pt["env_steps"] >= spec.timesteps:
+                    return
                 self.sent += 1
                 ratios = np.asarray(pt["cost_ratio"], dtype=float)
                 tune.report({METRIC: _finite(float(np.mean(ratios))), "env_steps": int(pt["env_steps"]),
@@ -295,12 +299,11 @@ def _trial(config: dict, spec: StudySpec) -> None:
             self._send()
             return True
 
-        def _on_training_end(self) -> None:
-            self._send()
-
+    report = _Report()
     train(spec.env, spec.algo, timesteps=spec.timesteps, seed=spec.seed, out=os.path.join(trial_dir, "run"),
-          progress=False, hyperparams=overrides, env_kwargs=spec.env_kwargs or None, callbacks=[curve, _Report()],
+          progress=False, hyperparams=overrides, env_kwargs=spec.env_kwargs or None, callbacks=[curve, report],
           checkpoint_freq=0, threads=spec.cpus_per_trial)
+    report._send(final=True)
 
 
 class _Progress:

@@ -4,6 +4,7 @@ accepts; every episode a trial is scored on is a tuning episode, never an evalua
 interrupted study (SIGINT, Tune's own Ctrl-C handling) resumes without running finished trials again."""
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -55,6 +56,8 @@ def test_study_writes_table_figure_and_a_complete_rl_zoo3_section(study):
     complete = [r for r in rows if r["status"] == "complete"]
     assert complete and all(r["env_steps"] >= SPEC.timesteps for r in complete)
     assert study.best["score"] == min(r["score"] for r in complete)
+    for r in complete:  # a finished run is kept whole (the last score is reported after the save)
+        assert os.path.exists(os.path.join(out, r["path"], "run", "model.zip"))
     with open(os.path.join(out, "trials.csv")) as fh:
         assert len(fh.read().strip().splitlines()) == 1 + 3
     # the best trial's recipe: the section rl-zoo3 reads for the env, complete (every key of ppo.yaml's default)
@@ -70,7 +73,7 @@ def test_study_writes_table_figure_and_a_complete_rl_zoo3_section(study):
     assert sec["env_kwargs"]["state_bound"] == b["state_bound"]
     lr = sec["learning_rate"]
     assert (lr.startswith("lin_") and b["lr_schedule"] == "linear") or (lr == pytest.approx(b["learning_rate"]))
-    head = open(os.path.join(out, "best.yml")).read().split(gym_id("hetero_mas"))[0]
+    head = open(os.path.join(out, "best.yml")).read().split("\n" + gym_id("hetero_mas") + ":")[0]
     assert "tuning episodes 20000-20001" in head and "3 trials" in head
 
 
@@ -127,13 +130,19 @@ def test_an_interrupted_study_resumes_without_repeating_finished_trials(local_ra
     assert not res.complete
     done = [r for r in res.rows if r["status"] in ("complete", "stopped early")]
     assert 1 <= len(done) < 3 and not os.path.exists(os.path.join(out, "best.yml"))
-    stamps = {r["trial_id"]: os.path.getmtime(os.path.join(out, r["path"], "result.json")) for r in done}
+    def history(row):  # the trial's reports (Tune's result.json) and its run's saved model
+        with open(os.path.join(out, row["path"], "result.json")) as fh:
+            reports = [(r["timestamp"], r["env_steps"], r["score"]) for r in map(json.loads, fh)]
+        model = os.path.join(out, row["path"], "run", "model.zip")  # Tune copies trial files (mtimes change)
+        return reports, hashlib.sha256(open(model, "rb").read()).hexdigest() if os.path.exists(model) else None
+
+    before = {r["trial_id"]: history(r) for r in done}
+    assert all(before[r["trial_id"]][1] is not None for r in done if r["status"] == "complete")
     res2 = run_study(SPEC, out, resume=True, progress=False)
     assert res2.complete and len(res2.rows) == 3
     assert os.path.exists(os.path.join(out, "best.yml"))
-    for tid, t in stamps.items():  # a finished trial was not run again
-        row = next(r for r in res2.rows if r["trial_id"] == tid)
-        assert os.path.getmtime(os.path.join(out, row["path"], "result.json")) == t
+    for tid, h in before.items():  # a finished trial was not run again: same reports, same saved model
+        assert history(next(r for r in res2.rows if r["trial_id"] == tid)) == h
 
 
 def test_search_space_holds_todays_recipe_and_maps_back_to_it():
