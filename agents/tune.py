@@ -524,6 +524,7 @@ def _plot(path: str, rows: list[dict], spec: StudySpec) -> None:
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for status, style in (("complete", dict(marker="o", color="C0", label="complete")),
@@ -542,6 +543,7 @@ def _plot(path: str, rows: list[dict], spec: StudySpec) -> None:
     finite = [r[METRIC] for r in rows if r[METRIC] is not None and math.isfinite(r[METRIC]) and r[METRIC] > 0]
     if finite and max(finite) / min(finite) > 20:
         ax.set_yscale("log")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_xlabel("trial")
     ax.set_ylabel(r"score: mean $J/J_{paper}$ (tuning episodes)")
     ax.set_title(f"tune {spec.algo} on {spec.env}: {spec.timesteps} env steps per trial, episodes "
