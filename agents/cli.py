@@ -428,7 +428,7 @@ def _tune(args) -> int:
         from ray import tune as _  # noqa: F401
     except ImportError as exc:
         _usage_error(f"tune needs Ray Tune and Optuna ({exc.name} is missing): pip install 'dobs-envs[distributed]'")
-    from .tune import StudyDirError, StudySpec, run_study, stored_spec
+    from .tune import StudyDirError, StudySpec, check_constructor_keys, run_study, stored_spec
 
     if args.resume and args.overwrite:
         _usage_error("--resume continues a study, --overwrite replaces it: give one of them")
@@ -451,6 +451,7 @@ def _tune(args) -> int:
                 kw["timesteps"] = resolve_recipe(kw["algo"], kw["env"], overrides=kw["hyperparams"] or None).n_timesteps
             spec = StudySpec(**kw)
             spec.check()
+            check_constructor_keys(spec)
     except (StudyDirError, HyperparamsError) as exc:
         _usage_error(f"--out {exc}" if isinstance(exc, StudyDirError) else f"--hyperparams: {exc}")
     except ValueError as exc:

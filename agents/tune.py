@@ -50,7 +50,8 @@ import numpy as np
 from .config import ALGOS, ENVS, env_key, gym_id
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
-__all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "write_best_recipe",
+__all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "stored_spec", "check_constructor_keys",
+           "write_best_recipe",
            "trials_table", "recipe_section", "STUDY_FILES", "METRIC"]
 
 #: the reported score (lower is better): mean J_policy / J_paper over the tuning episodes
@@ -239,6 +240,25 @@ def _recipe_hp(spec: StudySpec) -> dict:
     return resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None).hyperparams
 
 
+def check_constructor_keys(spec: StudySpec) -> None:
+    """ValueError naming the keys of the study's recipe (with ``spec.hyperparams``) that the algorithm's
+    class does not take, before any trial starts (every trial would fail the same way)."""
+    import inspect
+
+    from .algos import backend
+    from .recipes import resolve_recipe
+
+    recipe = resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None)
+    cls = backend(spec.algo).load_class()
+    params = inspect.signature(cls.__init__).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return
+    unknown = sorted(set(recipe.algo_kwargs) - set(params))
+    if unknown:
+        raise ValueError(f"hyperparams: {cls.__name__} takes no argument(s) {unknown} (from the recipe of {spec.algo} "
+                         f"on {spec.env} with the overrides {spec.hyperparams})")
+
+
 def _space(spec: StudySpec) -> SearchSpace:
     return SearchSpace(spec.algo, _recipe_hp(spec), spec.timesteps)
 
@@ -313,6 +333,8 @@ class _Progress:
         from ray.tune import Callback
 
         class _Bar(Callback):
+            dobs_envs_progress = True  # what run_study replaces in a restored experiment
+
             def __init__(self):
                 self.total, self.bar = total, None
 
@@ -426,6 +448,7 @@ def run_study(spec: StudySpec, out: str, *, resume: bool = False, overwrite: boo
     from ray.tune.search.optuna import OptunaSearch
 
     spec.check()
+    check_constructor_keys(spec)
     _quiet()
     out = os.path.abspath(out)
     _claim(out, spec, resume=resume, overwrite=overwrite)
@@ -451,6 +474,12 @@ def run_study(spec: StudySpec, out: str, *, resume: bool = False, overwrite: boo
         trainable = tune.with_resources(tune.with_parameters(_trial, spec=spec), {"cpu": spec.cpus_per_trial})
         if resume:
             tuner = tune.Tuner.restore(exp, trainable, resume_unfinished=True, resume_errored=False)
+            # Tune restores the callbacks stored with the experiment: this call's progress choice replaces
+            # the stored bar (Tune's private attribute; left alone if a Ray version lacks it)
+            run_config = getattr(getattr(tuner, "_local_tuner", None), "_run_config", None)
+            if run_config is not None:
+                kept = [cb for cb in (run_config.callbacks or []) if not getattr(cb, "dobs_envs_progress", False)]
+                run_config.callbacks = ([_Progress(spec.trials)] if progress else []) + kept
         else:
             searcher = OptunaSearch(space=space, metric=METRIC, mode="min", seed=spec.seed,
                                     points_to_evaluate=[baseline] if baseline else None)
@@ -485,9 +514,19 @@ def trials_table(out: str) -> list[dict]:
     ``score``, ``seconds``, the trial's directory and its searched values."""
     from ray.tune import ExperimentAnalysis
 
+    import logging
+
     spec = stored_spec(out)
-    analysis = ExperimentAnalysis(os.path.join(out, _EXPERIMENT))
-    trials = analysis.trials  # in the order Tune created them
+    quiet = logging.getLogger("ray.tune.analysis")  # "Failed to fetch metrics" of trials that never reported
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        analysis = ExperimentAnalysis(os.path.join(out, _EXPERIMENT))
+    finally:
+        quiet.setLevel(level)
+    # in the order Tune created them (its experiment tag starts with that counter; a restored experiment
+    # lists them in another order)
+    trials = sorted(analysis.trials, key=lambda t: int(str(t.experiment_tag).split("_")[0] or 0))
     rows = []
     for i, t in enumerate(trials):
         last = t.last_result or {}

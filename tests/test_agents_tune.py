@@ -141,6 +141,8 @@ def test_an_interrupted_study_resumes_without_repeating_finished_trials(local_ra
     res2 = run_study(SPEC, out, resume=True, progress=False)
     assert res2.complete and len(res2.rows) == 3
     assert os.path.exists(os.path.join(out, "best.yml"))
+    index = {r["trial_id"]: r["trial"] for r in res2.rows}
+    assert all(index[r["trial_id"]] == r["trial"] for r in done)  # rows keep the order the trials were created
     for tid, h in before.items():  # a finished trial was not run again: same reports, same saved model
         assert history(next(r for r in res2.rows if r["trial_id"] == tid)) == h
 
@@ -196,4 +198,6 @@ def test_cli_usage_errors(tmp_path, capsys):
     (occupied / "study").mkdir()
     err = _exit2(["tune", "--out", str(occupied), "--resume", "--algo", "sac"], capsys)
     assert "--algo sac (the study has ppo)" in err
+    err = _exit2(["tune", "--out", str(tmp_path / "n"), "--hyperparams", '{"n_stepz": 8}'], capsys)
+    assert "PPO takes no argument(s) ['n_stepz']" in err
     assert not os.path.exists(tmp_path / "n")
