@@ -47,12 +47,11 @@ from typing import Any
 
 import numpy as np
 
-from .config import ALGOS, ENVS, env_key, gym_id
+from .config import ALGOS, ENVS, gym_id
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "stored_spec", "check_constructor_keys",
-           "write_best_recipe",
-           "trials_table", "recipe_section", "STUDY_FILES", "METRIC"]
+           "write_best_recipe", "trials_table", "recipe_section", "STUDY_FILES", "METRIC"]
 
 #: the reported score (lower is better): mean J_policy / J_paper over the tuning episodes
 METRIC = "score"
