@@ -400,6 +400,11 @@ def _claim(out: str, spec: StudySpec, *, resume: bool, overwrite: bool) -> None:
         stored = _read_study_json(out).get("spec")
         if not stored or not os.path.isdir(os.path.join(out, _EXPERIMENT)):
             raise StudyDirError(f"{out!r} holds no study to resume (study.json and study/ of dobs-envs tune)")
+        from ray.tune import Tuner
+
+        if not Tuner.can_restore(os.path.join(out, _EXPERIMENT)):
+            raise StudyDirError(f"{out!r}: the study stopped before Ray Tune saved its state; nothing to resume "
+                                f"(start it again with --overwrite)")
         mine = json.loads(json.dumps(asdict(spec)))
         diff = [f"{k} {mine[k]!r} (the study has {stored.get(k)!r})" for k in mine if stored.get(k) != mine[k]]
         if diff:
