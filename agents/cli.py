@@ -1,4 +1,4 @@
-"""``dobs-envs train | evaluate | benchmark`` (registered by :mod:`dobs_envs.cli`)."""
+"""``dobs-envs train | evaluate | benchmark | tune`` (registered by :mod:`dobs_envs.cli`)."""
 from __future__ import annotations
 
 import argparse
@@ -38,6 +38,9 @@ def add_parser(sub) -> None:
     p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs)")
     p.add_argument("--hyperparams", type=_json_object, default=None,
                    help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
+    p.add_argument("--recipe", default=None, metavar="FILE",
+                   help="recipe file in rl-zoo3 format (e.g. dobs-envs tune's best.yml): its section for --env (the "
+                        "Gymnasium id's, else default) replaces the recipe's keys; --hyperparams apply over it")
     p.add_argument("--overwrite", action="store_true", help="replace an existing run in --out")
     p.add_argument("--resume", default=None, metavar="DIR",
                    help="continue the interrupted run in DIR from its last save (model.zip after Ctrl-C, else the "
@@ -93,6 +96,39 @@ def add_parser(sub) -> None:
                    help="list the runs that would train, the kept models that would be evaluated again and the "
                         "stored results that are reused; train nothing")
     p.set_defaults(func=_benchmark)
+
+    p = sub.add_parser("tune", help="search a recipe's hyperparameters with Ray Tune (Optuna + ASHA), scored by "
+                                    "J/J_paper on tuning episodes; writes best.yml (rl-zoo3 format) and trials.csv")
+    # defaults of the study's definition are None here (applied in _tune) so that --resume can tell which
+    # options were given and check them against study.json
+    p.add_argument("--env", default=None, choices=sorted(ENVS), help="environment (default tracking)")
+    p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3")
+    p.add_argument("--trials", type=_positive_int, default=None, help="number of trials (default 24)")
+    p.add_argument("--timesteps", type=_positive_int, default=None,
+                   help="env steps per trial (default: the recipe's n_timesteps)")
+    p.add_argument("--episodes", type=_positive_int, default=None,
+                   help="tuning episodes per score (default 5): seeds --tune-seed, --tune-seed + 1, ...")
+    p.add_argument("--tune-seed", type=_seed, default=None,
+                   help=f"first tuning episode seed (default {TUNING.start}; inside the {TUNING}, never the "
+                        f"{EVALUATION})")
+    p.add_argument("--seed", type=_seed, default=None,
+                   help=f"training seed of every trial and seed of Optuna's sampler (default 0; the {TRAINING})")
+    p.add_argument("--report-points", type=_positive_int, default=None,
+                   help="scores per trial along training, for ASHA's early stopping (default 6)")
+    p.add_argument("--hyperparams", type=_json_object, default=None,
+                   help="JSON overrides fixed for every trial (the searched values apply over them)")
+    p.add_argument("--out", required=True, help="study directory (Tune experiment, trials.csv/png, best.yml)")
+    p.add_argument("--backend", choices=("ray",), default="ray", help="ray (Ray Tune; the only backend)")
+    p.add_argument("--address", default=None,
+                   help="join a running Ray cluster (ray.init(address=...), e.g. 'auto' or 'host:6379'); default: "
+                        "start a local Ray of --cpus CPUs")
+    p.add_argument("--cpus", type=_positive_int, default=None, help="CPUs of the local Ray (default: all cores)")
+    p.add_argument("--cpus-per-trial", type=_positive_int, default=None,
+                   help="CPUs (and torch threads) per trial (default 1)")
+    p.add_argument("--resume", action="store_true", help="continue the interrupted study in --out")
+    p.add_argument("--overwrite", action="store_true", help="replace the study in --out")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_tune)
 
 
 def _usage_error(msg: str) -> None:
@@ -193,6 +229,13 @@ def _train(args) -> int:
                              what="--env")
     except EnvNameError as exc:
         _usage_error(str(exc))
+    if args.recipe is not None:
+        from .recipes import merge_overrides, recipe_file_section
+
+        try:
+            args.hyperparams = merge_overrides(recipe_file_section(args.recipe, env), args.hyperparams)
+        except HyperparamsError as exc:
+            _usage_error(f"--recipe: {exc}")
     out = args.out or default_run_dir(env, args.algo, args.multi_agent, args.seed)
     if os.path.exists(out) and not os.path.isdir(out):
         _usage_error(f"--out {out!r} is a file, not a directory")
@@ -250,6 +293,8 @@ def _resume(args) -> int:
     run = args.resume
     if args.overwrite:
         _usage_error("--resume continues a run, --overwrite replaces it: give one of them")
+    if args.recipe is not None:
+        _usage_error("--resume continues a run with its own recipe (config.json); --recipe starts a new run")
     if args.out is not None and os.path.abspath(args.out) != os.path.abspath(run):
         _usage_error(f"--out {args.out!r} differs from --resume {run!r} (a resumed run stays in its directory)")
     try:
@@ -394,4 +439,72 @@ def _benchmark_dry_run(args, plan) -> int:
         print(f"  train {sp['env']} {sp['agent']} seed {sp['seed']}: {sp['steps']} steps -> {sp['path']}{note}")
     for sp in sorted(again, key=key):
         print(f"  evaluate again {sp['env']} {sp['agent']} seed {sp['seed']} -> {sp['path']}")
+    return 0
+
+
+#: tune options that define a study: argparse dest -> (StudySpec field, default)
+_TUNE_OPTIONS = {"env": ("env", "tracking"), "algo": ("algo", "ppo"), "trials": ("trials", 24),
+                 "timesteps": ("timesteps", None), "episodes": ("episodes", 5), "tune_seed": ("tune_seed", TUNING.start),
+                 "seed": ("seed", 0), "report_points": ("report_points", 6), "cpus_per_trial": ("cpus_per_trial", 1),
+                 "hyperparams": ("hyperparams", {})}
+
+
+def _tune(args) -> int:
+    """``dobs-envs tune``: a Ray Tune study (:mod:`agents.tune`)."""
+    from .config import HyperparamsError
+
+    try:
+        import optuna  # noqa: F401
+        from ray import tune as _  # noqa: F401
+    except ImportError as exc:
+        _usage_error(f"tune needs Ray Tune and Optuna ({exc.name} is missing): pip install 'dobs-envs[distributed]'")
+    from .tune import StudyDirError, StudySpec, check_constructor_keys, run_study, stored_spec
+
+    if args.resume and args.overwrite:
+        _usage_error("--resume continues a study, --overwrite replaces it: give one of them")
+    if args.address is not None and args.cpus is not None:
+        _usage_error("--cpus sizes a local Ray; with --address the cluster's CPUs are used")
+    given = {dest: getattr(args, dest) for dest in _TUNE_OPTIONS if getattr(args, dest) is not None}
+    try:
+        if args.resume:
+            spec = stored_spec(args.out)
+            diffs = [f"--{d.replace('_', '-')} {v} (the study has {getattr(spec, _TUNE_OPTIONS[d][0])})"
+                     for d, v in given.items() if v != getattr(spec, _TUNE_OPTIONS[d][0])]
+            if diffs:
+                _usage_error(f"--resume {args.out}: the study's definition differs: {'; '.join(diffs)} (omit these "
+                             f"options to resume it as it was, or start a new study in another --out)")
+        else:
+            kw = {field: given.get(dest, default) for dest, (field, default) in _TUNE_OPTIONS.items()}
+            if kw["timesteps"] is None:
+                from .recipes import resolve_recipe
+
+                kw["timesteps"] = resolve_recipe(kw["algo"], kw["env"], overrides=kw["hyperparams"] or None).n_timesteps
+            spec = StudySpec(**kw)
+            spec.check()
+            check_constructor_keys(spec)
+    except (StudyDirError, HyperparamsError) as exc:
+        _usage_error(f"--out {exc}" if isinstance(exc, StudyDirError) else f"--hyperparams: {exc}")
+    except ValueError as exc:
+        _usage_error(str(exc))
+    try:
+        res = run_study(spec, args.out, resume=args.resume, overwrite=args.overwrite, address=args.address,
+                        cpus=args.cpus, progress=not args.no_progress)
+    except StudyDirError as exc:
+        _usage_error(f"--out {exc}")
+    except KeyboardInterrupt:  # a second Ctrl-C: Ray was shut down by run_study's finally
+        print(f"dobs-envs: tune aborted; finished trials are kept in {args.out}/study; continue with: "
+              f"dobs-envs tune --resume --out {args.out}", file=sys.stderr)
+        raise SystemExit(130) from None
+    n = {s: sum(r["status"] == s for r in res.rows) for s in ("complete", "stopped early", "error", "unfinished")}
+    summary = (f"{len(res.rows)} trials ({n['complete']} complete, {n['stopped early']} stopped early, {n['error']} "
+               f"failed) in {res.seconds:.0f} s")
+    if not res.complete:
+        print(f"dobs-envs: tune interrupted: {summary}; finished trials are kept in {args.out}/study; continue "
+              f"with: dobs-envs tune --resume --out {args.out}", file=sys.stderr)
+        return 130
+    if res.best is None:
+        print(f"{summary}; no trial finished its budget: no best.yml (see {args.out}/trials.csv)")
+        return 1
+    print(f"{summary}; best trial {res.best['trial']}: score {res.best['score']:.4g} (mean J/J_paper on tuning "
+          f"episodes {spec.episode_seeds[0]}-{spec.episode_seeds[-1]}) -> {args.out}/best.yml, trials.csv, trials.png")
     return 0

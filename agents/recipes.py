@@ -12,12 +12,14 @@ is :meth:`agents.algos.AlgoBackend.constructor_kwargs`.
 """
 from __future__ import annotations
 
+import copy
+import os
 from dataclasses import dataclass
 from typing import Any
 
-from .config import load_hyperparams
+from .config import HyperparamsError, env_key, gym_id, load_hyperparams, read_hyperparams_file
 
-__all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "EXTRA_KEYS"]
+__all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "recipe_file_section", "merge_overrides", "EXTRA_KEYS"]
 
 #: hyperparameter keys that are not constructor arguments of the algorithm (``agents/`` acts on them)
 EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_kwargs", "noise_type", "noise_std",
@@ -91,3 +93,30 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
                   agent_id=bool(hp.get("agent_id", False)) and multi_agent,
                   train_env_kwargs=dict(hp.get("env_kwargs") or {}), residual_scale=residual_scale, bc=bc,
                   action_noise_sigma=sigma, hyperparams=hp)
+
+
+def recipe_file_section(path: str, env_name: str) -> dict:
+    """The section of the recipe file ``path`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``)
+    that rl-zoo3 would read for ``env_name``: its Gymnasium id's section, else ``default``; in
+    :mod:`agents.config`'s vocabulary, validated by :func:`agents.config.read_hyperparams_file` (nothing
+    named in it is imported). Used as hyperparameter overrides: a complete section replaces the env's
+    recipe key by key. :class:`agents.config.HyperparamsError` names the file when no section applies."""
+    if not os.path.isfile(path):
+        raise HyperparamsError(f"recipe file {path!r} does not exist")
+    table = read_hyperparams_file(path)
+    gid = gym_id(env_key(env_name))
+    for name in (gid, "default"):
+        if name in table:
+            return table[name]
+    raise HyperparamsError(f"{path} has no section {gid!r} (or 'default') for env {env_name!r}; its sections: "
+                           f"{sorted(map(str, table))}")
+
+
+def merge_overrides(base: dict | None, over: dict | None) -> dict:
+    """``over`` merged into a copy of ``base`` (nested mappings merged key by key, as
+    :func:`agents.config.load_hyperparams` merges overrides into a recipe)."""
+    out = copy.deepcopy(dict(base or {}))
+    for k, v in (over or {}).items():
+        out[k] = merge_overrides(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) \
+            else copy.deepcopy(v)
+    return out

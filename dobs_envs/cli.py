@@ -4,7 +4,7 @@ Sub-commands live next to the code they drive and register themselves through an
 ``add_parser(subparsers)`` function:
 
 - ``reproduce``  -> :mod:`dobs_envs.reproduce` (the paper's numerical examples)
-- ``train``, ``evaluate``, ``benchmark`` -> :mod:`agents.cli` (needs the ``rl`` extra)
+- ``train``, ``evaluate``, ``benchmark``, ``tune`` -> :mod:`agents.cli` (needs the ``rl`` extra)
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import sys
 #: module -> the sub-commands it registers (used for a helpful stub when its import fails)
 _SUBCOMMAND_MODULES = {
     "dobs_envs.reproduce": ("reproduce",),
-    "agents.cli": ("train", "evaluate", "benchmark"),
+    "agents.cli": ("train", "evaluate", "benchmark", "tune"),
 }
 
 
