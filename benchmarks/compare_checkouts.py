@@ -12,13 +12,19 @@ are measured the same way:
   copy by copy; two threads), observations, features, rewards, reason codes and simulation
   states over 20 steps of random (partly clipped) inputs with resets; large initial states
   (split Euler steps); the compiled closed loop (``rollout``) of every paper scenario, per-copy
-  epsilon and the oracle variant; ``step_env`` on a random design. Prints one line per run and
-  whether the two checkouts agree bit for bit.
+  epsilon and the oracle variant; ``step_env`` on a random design; the front ends over the core
+  (observations, rewards, flags, every info value, actions mapped to inputs): the PettingZoo env
+  (also with ``normalized_actions``/``padded_observations``), ``gym.make`` and ``gym.make_vec`` and
+  SB3 ``agents.core_vec_env.CoreVecEnv`` (centralised and shared slots, agent ids, rescaled actions,
+  diagnostics; skipped when the checkout has no ``agents``). Prints one line per run and whether
+  the two checkouts agree bit for bit.
 - ``--speed`` (default): ``gym.make(env_id)`` control steps/s (single env),
   ``gym.make_vec(env_id, num_envs=B, threads=1)`` env-steps/s, and the simulation kernel alone
   (``control_period_compiled``, NE2, 50 Euler steps per period, B = 1 and B), best of ``--repeats`` runs of
   about ``--seconds`` each, interleaved (base, head, head, base, ...: the order alternates): only
-  ratios measured this way mean anything on a shared machine.
+  ratios measured this way mean anything on a shared machine. ``--clock cpu`` times each run by
+  the worker's CPU time instead of the wall clock (on a machine busy with other work: the time the
+  worker computes, not the time it waits for a core; all runs are single-threaded).
 """
 from __future__ import annotations
 
@@ -109,10 +115,91 @@ def digest():
             s = step_env(s, u, prm, r)
             acc += [s.x, s.z, s.gamma, s.gamma_s, s.v, s.x_r]
         out[f"step_env random design B={B}"] = h(*acc)
+    out.update(adapters())
     return out
 
-def speed_setup(env_id, batch):
+def _flat_info(info):
+    # an info dict (or a list/dict of them) as arrays in a fixed order: keys sorted, values as float64
+    if isinstance(info, dict) and info and all(isinstance(v, dict) for v in info.values()):
+        return [a for k in sorted(info) for a in _flat_info(info[k])]
+    if isinstance(info, list):
+        return [a for i in info for a in _flat_info(i)]
+    acc = []
+    for k in sorted(info):
+        v = info[k]
+        acc.append(np.frombuffer(k.encode(), dtype=np.uint8))
+        acc.append(np.asarray(v, dtype=np.float64) if not isinstance(v, np.ndarray) or v.dtype != object
+                   else np.zeros(0))
+    return acc
+
+def adapters():
+    # the front ends over the same core: PettingZoo, Gymnasium, Gymnasium vector, SB3 CoreVecEnv
     import gymnasium as gym
+    import dobs_envs  # noqa: F401
+    from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
+    out = {}
+    rng = np.random.default_rng(3)
+    for name, kw in (("hetero_mas", {}), ("hetero_mas normalized+padded", dict(normalized_actions=True,
+                                                                             padded_observations=True))):
+        env = HeteroMASEnv(max_cycles=6, **kw)
+        obs, infos = env.reset(seed=5)
+        acc = [a for k in sorted(obs) for a in [obs[k]]] + _flat_info(infos)
+        for _ in range(8):
+            if not env.agents:
+                obs, infos = env.reset()
+                acc += [obs[k] for k in sorted(obs)] + _flat_info(infos)
+            acts = {a: (rng.uniform(-1.3, 1.3, env.action_space(a).shape) * env.action_space(a).high)
+                    .astype(np.float32) for a in env.agents}
+            obs, rew, term, trunc, infos = env.step(acts)
+            acc += [obs[k] for k in sorted(obs)] + [np.array([rew[k], term[k], trunc[k]], float) for k in sorted(rew)]
+            acc += _flat_info(infos)
+        acc += list(env.actions_from_inputs(np.linspace(-1, 1, env.n_inputs)).values())
+        out[f"parallel env {name}"] = h(*acc)
+    for gid, kw in (("dobs_envs/HeteroMAS-v0", {}), ("dobs_envs/Tracking-v0", dict(normalized_actions=True))):
+        e = gym.make(gid, max_episode_steps=5, **kw)
+        o, info = e.reset(seed=9)
+        acc = [o] + _flat_info(info)
+        for _ in range(7):
+            o, r, te, tr, info = e.step((rng.uniform(-1.3, 1.3, e.action_space.shape) * e.action_space.high)
+                                        .astype(np.float32))
+            acc += [o, np.array([r, te, tr], float)] + _flat_info(info)
+            if te or tr:
+                o, info = e.reset()
+                acc += [o] + _flat_info(info)
+        out[f"gym env {gid} {kw}"] = h(*acc)
+        v = gym.make_vec(gid, num_envs=5, max_episode_steps=4, threads=1, **kw)
+        o, info = v.reset(seed=11)
+        acc = [o] + _flat_info(info)
+        for _ in range(7):
+            o, r, te, tr, info = v.step((rng.uniform(-1.3, 1.3, v.action_space.shape) * v.action_space.high)
+                                        .astype(np.float32))
+            acc += [o, r, te, tr] + _flat_info(info)
+        out[f"vector env {gid} {kw}"] = h(*acc)
+    try:
+        from agents.core_vec_env import CoreVecEnv
+    except ImportError:
+        return out
+    for cls, shared, agent_id, rescale, diag, kw in (
+            (HeteroMASEnv, True, True, True, True, {}), (HeteroMASEnv, True, False, False, True, {}),
+            (HeteroMASEnv, False, False, True, True, {}),
+            (HeteroMASEnv, True, True, True, False, dict(normalized_actions=True, padded_observations=True)),
+            (TrackingEnv, True, False, True, True, {}), (TrackingEnv, False, False, True, False, {}),
+            (RandomNetworkEnv, True, True, True, True, {}), (RandomNetworkEnv, True, False, False, False, {})):
+        ve = CoreVecEnv(cls.make_core(4, max_cycles=5, **kw), shared=shared, agent_id=agent_id,
+                        rescale_actions=rescale, diagnostics=diag)
+        ve.seed(21)
+        acc = [ve.reset()] + _flat_info(ve.reset_infos)
+        for _ in range(7):
+            a = rng.uniform(-1.3, 1.3, (ve.num_envs,) + ve.action_space.shape) * (1 if rescale else 9)
+            ve.step_async(a.astype(np.float32))
+            o, r, d, infos = ve.step_wait()
+            acc += [o, r, d] + _flat_info(infos)
+        out[f"CoreVecEnv {cls.__name__} shared={shared} id={agent_id} rescale={rescale} diag={diag} {kw}"] = h(*acc)
+    return out
+
+def speed_setup(env_id, batch, clock="wall"):
+    import gymnasium as gym
+    now = time.process_time if clock == "cpu" else time.perf_counter
     import dobs_envs  # noqa: F401
     genv = gym.make(env_id)
     rng = np.random.default_rng(0)
@@ -125,18 +212,18 @@ def speed_setup(env_id, batch):
              * rng.random(v.action_space.shape).astype(np.float32) for _ in range(8)]
 
     def run_single(n):
-        t0 = time.perf_counter()
+        t0 = now()
         for k in range(n):
             _, _, te, tr, _ = genv.step(gpool[k % 512])
             if te or tr:
                 genv.reset()
-        return n / (time.perf_counter() - t0)
+        return n / (now() - t0)
 
     def run_vec(n):
-        t0 = time.perf_counter()
+        t0 = now()
         for k in range(n):
             v.step(vacts[k % 8])
-        return n * batch / (time.perf_counter() - t0)
+        return n * batch / (now() - t0)
     from dobs_envs.scenarios.paper import ne2
     from dobs_envs.sim.kernel import control_period_compiled
     params = ne2().sim_params(substeps=50)
@@ -149,10 +236,10 @@ def speed_setup(env_id, batch):
 
     def run_sim(B, n):
         st, u, r = sims[B]
-        t0 = time.perf_counter()
+        t0 = now()
         for _ in range(n):
             control_period_compiled(st.x, st.z, st.gamma, st.gamma_s, st.v, st.x_r, u, r, params)
-        return n * B / (time.perf_counter() - t0)
+        return n * B / (now() - t0)
     run_single(300); run_vec(3); run_sim(1, 10); run_sim(batch, 1)
     return {"single": run_single, "vec": run_vec, "sim1": lambda n: run_sim(1, n), "simB": lambda n: run_sim(batch, n)}
 
@@ -164,7 +251,7 @@ for line in sys.stdin:
     if cmd[0] == "digest":
         print(json.dumps(digest()), flush=True)
     elif cmd[0] == "setup":
-        runs = speed_setup(cmd[1], int(cmd[2]))
+        runs = speed_setup(cmd[1], int(cmd[2]), cmd[3])
         print(json.dumps("ok"), flush=True)
     else:
         print(json.dumps(runs[cmd[0]](int(cmd[1]))), flush=True)
@@ -209,6 +296,9 @@ def main(argv=None):
     ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
     ap.add_argument("--batch", type=int, default=1024)
     ap.add_argument("--env-id", default="dobs_envs/Tracking-v0")
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="time runs by the wall clock or by the worker's CPU time (process_time: on a loaded "
+                         "machine, not the time the worker waits for a core; single-threaded runs only)")
     args = ap.parse_args(argv)
     speed = args.speed or not args.digest
     workers = {"base": Worker(args.base), "head": Worker(args.head)}
@@ -226,7 +316,7 @@ def main(argv=None):
         status = 0 if same == len(dig["base"]) else 1
     if speed:
         for w in workers.values():
-            w.ask("setup", args.env_id, args.batch)
+            w.ask("setup", args.env_id, args.batch, args.clock)
         steps = {}
         for k, w in workers.items():  # calibrate run lengths on the base
             steps[k, "single"] = max(3, int(w.ask("single", 300) * args.seconds))
@@ -241,7 +331,7 @@ def main(argv=None):
             for what in ("single", "vec", "sim1", "simB"):
                 for k, w in (order if rep % 2 == 0 else order[::-1]):
                     best[k, what] = max(best[k, what], w.ask(what, steps[k, what]))
-        print(f"{args.env_id}, best of {args.repeats} interleaved runs of ~{args.seconds:g} s")
+        print(f"{args.env_id}, best of {args.repeats} interleaved runs of ~{args.seconds:g} s ({args.clock} clock)")
         for what, label in (("single", "gym single env (steps/s)"), ("vec", f"vector B={args.batch} threads=1 (env-steps/s)"),
                             ("sim1", "NE2 control period B=1 (periods/s)"),
                             ("simB", f"NE2 control period B={args.batch} (copy-periods/s)")):
