@@ -231,7 +231,7 @@ def _training_overrides(spec: dict) -> dict:
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
     (``training_only``: see :func:`_finished_run`)."""
-    from .train import resolve_recipe
+    from .recipes import resolve_recipe
 
     a = AGENTS[spec["agent"]]
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
@@ -264,7 +264,7 @@ def _stored_model(spec: dict) -> dict | None:
 
 def _evaluate_and_record(spec: dict, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``spec['path']`` on the spec's episodes and write ``result.json`` (atomically)."""
-    from .train import load_agent
+    from .loading import load_agent
 
     a = AGENTS[spec["agent"]]
     agent = load_agent(spec["path"])
@@ -369,19 +369,20 @@ def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray, 
            "env_steps": steps, "train_seconds_median": None}
     if steps is not None:
         row["train_seconds_median"] = float(np.median([r["train_seconds"] for r in runs]))
-    for key, mat in (("cost_ratio", ratio), ("transient_cost", _matrix(runs, "transient_cost")),
-                     ("steady_state_error", _matrix(runs, "steady_state_error")),
-                     ("final_tracking_error", _matrix(runs, "final_tracking_error"))):
-        est = interval_estimate(run_scores(mat))
+    ratio_scores = run_scores(ratio)
+    for key, scores in (("cost_ratio", ratio_scores), ("transient_cost", run_scores(_matrix(runs, "transient_cost"))),
+                        ("steady_state_error", run_scores(_matrix(runs, "steady_state_error"))),
+                        ("final_tracking_error", run_scores(_matrix(runs, "final_tracking_error")))):
+        est = interval_estimate(scores)
         row[f"{key}_iqm"], row[f"{key}_ci_low"], row[f"{key}_ci_high"] = est["iqm"], est["ci_low"], est["ci_high"]
-    mean = mean_estimate(run_scores(ratio))
+    mean = mean_estimate(ratio_scores)
     row["cost_ratio_mean"], row["cost_ratio_mean_ci_low"], row["cost_ratio_mean_ci_high"] = \
         mean["mean"], mean["ci_low"], mean["ci_high"]
     poi = improvement_estimate(cost, paper_cost)
     row["poi"], row["poi_ci_low"], row["poi_ci_high"] = poi["poi"], poi["ci_low"], poi["ci_high"]
     row["cost_ratio_episode_iqm"] = float(iqm(ratio))
     row["failure_rate"] = float(np.mean(_matrix(runs, "failed")))
-    row["run_scores"] = run_scores(ratio).tolist()
+    row["run_scores"] = ratio_scores.tolist()
     flat = [e for r in runs for e in r["episodes"]]
     row.update(summarise_dicts(flat))
     return row

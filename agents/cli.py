@@ -53,7 +53,8 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=_seed, default=TUNING.start,
                    help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "
                         f"model selection; the {EVALUATION} holds the benchmark's evaluation episodes)")
-    p.add_argument("--json", default=None, help="also write the summary to this file")
+    p.add_argument("--json", default=None, help="also write the summary to this file (a new file; see --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept a run whose config.json names 'package.module:factory' (imports that code; "
                         "model.zip and vecnormalize.pkl are pickles: load only runs you trust)")
@@ -133,7 +134,8 @@ _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_age
 
 def _interrupted(out: str, exc: KeyboardInterrupt) -> None:
     """One line on stderr after Ctrl-C, exit status 130 (128 + SIGINT)."""
-    from .train import RunDirError, TrainingInterrupted, resume_point
+    from .runs import RunDirError, resume_point
+    from .train import TrainingInterrupted
 
     if isinstance(exc, TrainingInterrupted):
         msg = (f"interrupted after {exc.timesteps_done} of {exc.timesteps} env steps; model, normaliser and config "
@@ -161,7 +163,8 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 
 def _train(args) -> int:
     from .config import EnvNameError, HyperparamsError, check_env_name
-    from .train import default_run_dir, train
+    from .runs import default_run_dir
+    from .train import train
 
     if args.resume is not None:
         return _resume(args)
@@ -206,7 +209,7 @@ def _train(args) -> int:
 def _occupied_run_dir(out: str) -> str:
     """Why ``train --out`` refuses the non-empty directory ``out``: a run (its status, resumable or not)
     or other files (named), and the ways out."""
-    from .train import RunDirError, read_run_config, resume_point
+    from .runs import RunDirError, read_run_config, resume_point
 
     if os.path.isfile(os.path.join(out, "config.json")):
         try:
@@ -231,7 +234,8 @@ def _occupied_run_dir(out: str) -> str:
 def _resume(args) -> int:
     """``train --resume DIR``: the run's own configuration; options that define a run must agree with it."""
     from .config import EnvNameError, env_key
-    from .train import RunDirError, read_run_config, resume, resume_point
+    from .runs import RunDirError, read_run_config, resume_point
+    from .train import resume
 
     run = args.resume
     if args.overwrite:
@@ -274,7 +278,7 @@ def _resume(args) -> int:
 def _evaluate(args) -> int:
     from .config import EnvNameError
     from .evaluate import evaluate_model
-    from .train import RunDirError
+    from .runs import RunDirError
 
     if args.json:
         d = os.path.dirname(os.path.abspath(args.json))
@@ -282,6 +286,8 @@ def _evaluate(args) -> int:
             _usage_error(f"--json {args.json!r} is a directory; give a file name, e.g. {os.path.join(args.json, 'eval.json')}")
         if not os.path.isdir(d):
             _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
+        if os.path.exists(args.json) and not args.overwrite:
+            _usage_error(f"--json {args.json!r} already exists; pass --overwrite to replace it, or choose another file")
     try:
         summ = evaluate_model(args.model, args.episodes, args.seed, allow_custom_env=args.allow_custom_env)
     except (RunDirError, EnvNameError) as exc:
@@ -289,9 +295,10 @@ def _evaluate(args) -> int:
     for k, v in summ.items():
         if k != "seeds":
             print(f"{k:34s} {v}")
-    if args.json:
-        with open(args.json, "w") as fh:
+    if args.json:  # atomic: an interrupted write never leaves a half-written file under the user's name
+        with open(args.json + ".tmp", "w") as fh:
             json.dump(summ, fh, indent=2)
+        os.replace(args.json + ".tmp", args.json)
     return 0
 
 

@@ -45,7 +45,7 @@ def make_curve_callback(env_name: str, env_kwargs: dict, seeds, every: int, *, n
 
     from .config import gym_factory, parallel_factory
     from .evaluate import run_episode
-    from .train import TrainedAgent
+    from .loading import TrainedAgent
 
     seeds = [int(s) for s in seeds]
     if every < 1:

@@ -179,7 +179,8 @@ def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True
     ``vecnormalize.pkl`` are pickles: load runs only from trusted sources.
     """
     from .config import check_env_name, gym_factory, parallel_factory
-    from .train import load_agent, read_run_config
+    from .loading import load_agent
+    from .runs import read_run_config
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")

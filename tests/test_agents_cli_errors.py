@@ -47,7 +47,7 @@ def test_run_directory_cannot_make_us_import_code(run_dir, tmp_path, capsys, mon
     assert not marker.exists() and "evil_dobs_module" not in sys.modules
 
 
-@pytest.mark.parametrize("case", ["missing", "no_model", "corrupt_json", "not_a_dict", "bad_algo"])
+@pytest.mark.parametrize("case", ["missing", "no_model", "corrupt_json", "not_a_dict", "bad_algo", "other_library"])
 def test_evaluate_bad_run_directories(case, run_dir, tmp_path, capsys):
     d = tmp_path / "r"
     if case != "missing":
@@ -62,13 +62,31 @@ def test_evaluate_bad_run_directories(case, run_dir, tmp_path, capsys):
         cfg = json.load(open(d / "config.json"))
         cfg["algo"] = "dqn"
         json.dump(cfg, open(d / "config.json", "w"))
+    elif case == "other_library":  # a model of another implementation is never loaded by ours
+        cfg = json.load(open(d / "config.json"))
+        cfg["library"] = "sbx-rl"
+        json.dump(cfg, open(d / "config.json", "w"))
     err = _exit2(["evaluate", "--model", str(d)], capsys)
     assert "--model" in err
+    if case == "other_library":
+        assert "trained with 'sbx-rl'" in err
 
 
 def test_evaluate_json_into_missing_directory(run_dir, tmp_path, capsys):
     err = _exit2(["evaluate", "--model", run_dir, "--json", str(tmp_path / "nope" / "e.json")], capsys)
     assert "--json" in err
+
+
+def test_evaluate_json_never_overwrites_without_the_flag(run_dir, tmp_path, capsys):
+    """The user's file is kept unless --overwrite says otherwise; with it the summary replaces it."""
+    js = tmp_path / "e.json"
+    js.write_text("the user's notes")
+    err = _exit2(["evaluate", "--model", run_dir, "--episodes", "1", "--json", str(js)], capsys)
+    assert "--json" in err and "already exists" in err and "--overwrite" in err
+    assert js.read_text() == "the user's notes"
+    assert main(["evaluate", "--model", run_dir, "--episodes", "1", "--json", str(js), "--overwrite"]) == 0
+    assert json.load(open(js))["episodes"] == 1
+    assert sorted(os.listdir(tmp_path)) == ["e.json"]  # no temporary file left
 
 
 @pytest.mark.parametrize("argv,needle", [

@@ -13,7 +13,8 @@ import pytest
 
 from agents.config import (ALGOS, ENVS, HYPERPARAMS_DIR, HyperparamsError, load_hyperparams, parse_kwargs_string,
                            read_hyperparams_file)
-from agents.train import _policy_kwargs, resolve_recipe
+from agents.algos import torch_policy_kwargs
+from agents.recipes import resolve_recipe
 
 FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes.json")
 
@@ -26,7 +27,7 @@ def _case(key: str):
 
 def _plain(recipe) -> dict:
     d = recipe.as_dict()
-    pk = _policy_kwargs(d["algo_kwargs"]["policy_kwargs"])
+    pk = torch_policy_kwargs(d["algo_kwargs"]["policy_kwargs"])
     if "activation_fn" in pk:
         pk["activation_fn"] = pk["activation_fn"].__name__
     d["algo_kwargs"]["policy_kwargs"] = pk

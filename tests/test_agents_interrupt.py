@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from agents.benchmark import BUDGETS
-from agents.train import RunDirError, read_run_config, resume, resume_point
+from agents.runs import RunDirError, read_run_config, resume_point
+from agents.train import resume
 from dobs_envs.cli import main
 
 TINY_PPO = BUDGETS["tiny"]["hyperparams"]["ppo"]
@@ -104,8 +105,8 @@ def test_sigint_saves_the_run_and_exits_130(interrupted_ppo):
 def test_evaluate_accepts_a_checkpoint_and_the_interrupted_run(interrupted_ppo, tmp_path, capsys):
     out = interrupted_ppo[0]
     ckpt = os.path.join(out, "checkpoints", _checkpoints(out)[0])
-    for model in (ckpt, out):
-        js = tmp_path / "e.json"
+    for k, model in enumerate((ckpt, out)):
+        js = tmp_path / f"e{k}.json"
         assert main(["evaluate", "--model", model, "--episodes", "1", "--json", str(js)]) == 0
         summ = json.load(open(js))
         assert summ["episodes"] == 1 and np.isfinite(summ["cost_mean"])

@@ -10,8 +10,10 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from agents.config import load_hyperparams
-from agents.train import load_agent, train
+from agents.algos import BACKENDS, backend
+from agents.config import ALGOS, load_hyperparams
+from agents.loading import load_agent
+from agents.train import train
 
 
 class PointMasses(ParallelEnv):
@@ -68,6 +70,7 @@ def _check_saved(path, algo, multi_agent, normalize):
     assert os.path.exists(os.path.join(path, "vecnormalize.pkl")) == normalize
     cfg = json.load(open(os.path.join(path, "config.json")))
     assert cfg["algo"] == algo and cfg["multi_agent"] == multi_agent
+    assert (cfg["library"], cfg["library_version"]) == (backend(algo).library, backend(algo).library_version())
     assert os.listdir(os.path.join(path, "checkpoints"))
 
 
@@ -94,6 +97,11 @@ def test_centralised_smoke(algo, tmp_path):
     o = np.asarray(obs, np.float32)[None]
     mem, _ = res.model.predict(agent.vecnorm.normalize_obs(o), deterministic=True)
     np.testing.assert_allclose(agent.predict(o), mem, rtol=1e-5, atol=1e-6)
+    # runs written before config.json recorded the library (results/*.tar.gz) still load
+    cfg_path = os.path.join(out, "config.json")
+    cfg = json.load(open(cfg_path))
+    json.dump({k: v for k, v in cfg.items() if k not in ("library", "library_version")}, open(cfg_path, "w"))
+    np.testing.assert_array_equal(load_agent(out).predict(o), agent.predict(o))
 
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
@@ -120,6 +128,12 @@ def test_multi_agent_smoke(algo, tmp_path):
 def test_multi_agent_rejects_td3(tmp_path):
     with pytest.raises(ValueError, match="multi-agent"):
         train(PointMasses, "td3", multi_agent=True, timesteps=10, out=str(tmp_path), progress=False)
+
+
+def test_every_recipe_algorithm_has_a_backend():
+    assert set(BACKENDS) == set(ALGOS)
+    with pytest.raises(ValueError, match="unknown algorithm"):
+        backend("a2c")
 
 
 def test_hyperparams_lookup_order():

@@ -11,7 +11,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 import dobs_envs  # noqa: F401
 from agents.core_vec_env import CoreVecEnv
-from agents.train import build_vec_env, core_of
+from agents.training_envs import build_vec_env, core_of
 from agents.vec_env import ParallelVecEnv
 from dobs_envs import hetero_mas_v0, random_network_v0, tracking_v0
 from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
@@ -60,7 +60,6 @@ def test_shared_matches_parallel_vec_env(agent_id, rescale):
     rng = np.random.default_rng(2)
     acts = rng.uniform(-1.5, 1.5, size=(steps, 10, 1)).astype(np.float32) * (1 if rescale else 8)
     _same_streams(va, vb, acts)
-
 
 
 def test_shared_rescaled_actions_decode_as_slot_encoder_with_bounds_that_are_not_float32():

@@ -13,19 +13,25 @@ from readme_tables import check_readme_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ARCHIVES = {
-    # archive -> (env argument, budget, runs, {env: README heading of its table})
+    # archive -> (env argument, budget, runs, {env: README heading of its table}, --agents (None: the budget's))
     "hetero_mas_full_runs.tar.gz": ("hetero_mas", "full", 80,
-                                    {"hetero_mas": "### RL versus the paper's controller (full budget, hetero_mas)"}),
+                                    {"hetero_mas": "### RL versus the paper's controller (full budget, hetero_mas)"},
+                                    None),
     "quick_all_runs.tar.gz": ("all", "quick", 48,
                               {e: f"#### {e} (quick budget)" for e in
-                               ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}),
+                               ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
+    # three of the budget's eight agents so far (README, full budget on tracking: the other five are
+    # trained with the off-policy agents at PPO's budget)
+    "tracking_full_runs.tar.gz": ("tracking", "full", 30,
+                                  {"tracking": "### RL versus the paper's controller (full budget, tracking)"},
+                                  ["ppo", "ppo_ma", "ppo_res"]),
 }
 
 
 @pytest.fixture(scope="module", params=sorted(ARCHIVES))
 def extracted(request, tmp_path_factory):
     name = request.param
-    env, budget, _, _ = ARCHIVES[name]
+    env, budget, _, _, _ = ARCHIVES[name]
     out = tmp_path_factory.mktemp(name.split(".")[0])
     with tarfile.open(os.path.join(ROOT, "results", name)) as tf:
         names = tf.getnames()
@@ -39,8 +45,8 @@ def test_every_stored_run_is_reused_with_todays_recipes(extracted):
     """A recipe edit that changes an agent's training makes its stored runs stale: the README's tables
     would then no longer be what the command gives (retrain, re-archive)."""
     name, out = extracted
-    env, budget, runs, _ = ARCHIVES[name]
-    plan = plan_runs(env, budget, out)
+    env, budget, runs, _, agents = ARCHIVES[name]
+    plan = plan_runs(env, budget, out, agents=agents)
     assert len(plan.specs) == runs
     assert [(sp["env"], sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
 
@@ -53,9 +59,9 @@ def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
     from agents.benchmark import run_benchmark
 
     name, out = extracted
-    env, budget, _, headings = ARCHIVES[name]
-    assert pending_runs(plan_runs(env, budget, out)) == []  # or this would train for hours
-    run_benchmark(env, budget, out, workers=1, progress=False)
+    env, budget, _, headings, agents = ARCHIVES[name]
+    assert pending_runs(plan_runs(env, budget, out, agents=agents)) == []  # or this would train for hours
+    run_benchmark(env, budget, out, workers=1, progress=False, agents=agents)
     for e, heading in headings.items():
         check_readme_table(heading, os.path.join(out, e, "results.json"))
 
@@ -66,10 +72,10 @@ def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
     from agents.benchmark import RunConflictError, reevaluated_runs, replaced_runs, run_benchmark
 
     name, out = extracted
-    env, budget, runs, _ = ARCHIVES[name]
-    plan = plan_runs(env, budget, out, episodes=5)
+    env, budget, runs, _, agents = ARCHIVES[name]
+    plan = plan_runs(env, budget, out, episodes=5, agents=agents)
     todo = pending_runs(plan)
     assert len(todo) == runs and len(replaced_runs(todo)) == runs and reevaluated_runs(plan) == []
     with pytest.raises(RunConflictError, match=f"{runs} finished run"):
-        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False)
-    assert pending_runs(plan_runs(env, budget, out)) == []  # nothing was touched
+        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False, agents=agents)
+    assert pending_runs(plan_runs(env, budget, out, agents=agents)) == []  # nothing was touched

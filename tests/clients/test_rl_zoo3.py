@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR
-from agents.train import resolve_recipe
+from agents.recipes import resolve_recipe
 
 if importlib.util.find_spec("rl_zoo3") is None:  # as conftest.require, without importing it here
     if os.environ.get("CI"):

@@ -1,0 +1,147 @@
+"""Trained agents loaded for evaluation: :func:`load_agent` reads a run directory (or its ``model.zip``,
+or one of its checkpoints) into a :class:`TrainedAgent`, which acts on the task's own environment.
+
+Observations are normalised with the statistics saved with the model (``vecnormalize.pkl``); a
+multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEncoder` (the padding and
+one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
+loaded by the run's algorithm backend (:mod:`agents.algos`). ``model.zip`` and ``vecnormalize.pkl`` are
+pickles: load runs only from trusted sources.
+"""
+from __future__ import annotations
+
+import pickle
+from typing import Callable
+
+import numpy as np
+
+from .algos import backend
+from .runs import RunDirError, load_or_refuse, run_files
+from .vec_env import SlotEncoder
+
+__all__ = ["TrainedAgent", "load_agent"]
+
+
+class TrainedAgent:
+    """A saved run loaded for evaluation: normalises observations like in training.
+
+    ``central_policy()`` -> ``obs -> action`` (Gymnasium env);
+    ``parallel_policy(env)`` -> ``{agent: obs} -> {agent: action}`` (PettingZoo env,
+    shared policy, same padding/one-hot as :class:`agents.vec_env.ParallelVecEnv`).
+    """
+
+    @classmethod
+    def from_model(cls, model, vecnorm, config: dict) -> "TrainedAgent":
+        """The agent being trained (``model``, its live ``VecNormalize`` or None), e.g. for
+        learning curves: observations are normalised with the current statistics."""
+        self = cls.__new__(cls)
+        self.config, self.path, self.model_path, self.model = dict(config), None, None, model
+        self.algo = config["algo"]
+        self.multi_agent = bool(config["multi_agent"])
+        self.vecnorm = vecnorm
+        return self
+
+    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+        if self.vecnorm is None or not getattr(self.vecnorm, "norm_obs", False):
+            return obs
+        return self.vecnorm.normalize_obs(obs)
+
+    def __init__(self, path: str, device: str = "cpu"):
+        files = run_files(path)
+        self.config = files.config
+        self.path = files.run_dir
+        self.model_path = files.model
+        self.algo = self.config["algo"]
+        self.multi_agent = bool(self.config["multi_agent"])
+        self.model = load_or_refuse(files.model, lambda: backend(self.algo).load(files.model, device=device))
+        vn = files.vecnormalize
+        self.vecnorm = None
+        if vn is not None:
+            def unpickle():
+                with open(vn, "rb") as fh:
+                    return pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
+
+            self.vecnorm = load_or_refuse(vn, unpickle)
+            if not hasattr(self.vecnorm, "normalize_obs"):
+                raise RunDirError(f"{vn} holds a {type(self.vecnorm).__name__}, not the run's VecNormalize")
+            self.vecnorm.training = False
+            self.vecnorm.norm_reward = False
+
+    @property
+    def hybrid(self) -> str | None:
+        return self.config.get("hybrid")
+
+    @property
+    def name(self) -> str:
+        tag = {"residual": " residual", "bc": " BC-warm-start"}.get(self.hybrid or "", "")
+        return f"{self.algo.upper()}{tag}{' (shared)' if self.multi_agent else ''}"
+
+    def policy_for(self, env, deterministic: bool = True) -> Callable:
+        """The agent acting on the task's own env ``env`` (the PettingZoo env when the agent
+        is multi-agent, else the centralised Gymnasium env): ``obs -> applied input``.
+        A residual agent is composed with the paper's controller (:class:`agents.hybrid.ResidualPolicy`)."""
+        if self.hybrid == "residual":
+            from .hybrid import ResidualPolicy
+
+            corr = self.parallel_policy(env, deterministic) if self.multi_agent else self.central_policy(deterministic)
+            return ResidualPolicy(env, corr, float(self.config["residual_scale"]), parallel=self.multi_agent)
+        return self.parallel_policy(env, deterministic) if self.multi_agent else self.central_policy(deterministic)
+
+    @property
+    def observation_space(self):
+        return self.model.observation_space
+
+    @property
+    def action_space(self):
+        return self.model.action_space
+
+    def predict(self, obs, deterministic: bool = True) -> np.ndarray:
+        obs = self.normalize_obs(np.asarray(obs, dtype=np.float32))
+        act, _ = self.model.predict(obs, deterministic=deterministic)
+        return act
+
+    def central_policy(self, deterministic: bool = True) -> Callable:
+        """``obs -> action`` in the env's own action space (undoes the [-1, 1] rescaling)."""
+        lo, hi = self.action_space.low, self.action_space.high
+        rescale = self.config.get("normalize_actions") and self.config.get("action_low") is not None
+        if rescale:
+            elo = np.asarray(self.config["action_low"], dtype=np.float64)
+            ehi = np.asarray(self.config["action_high"], dtype=np.float64)
+
+        def policy(obs):
+            a = np.clip(self.predict(np.asarray(obs)[None], deterministic)[0], lo, hi)
+            if rescale:
+                a = elo + (a.astype(np.float64) + 1.0) * 0.5 * (ehi - elo)
+            return a
+
+        return policy
+
+    def encoder_for(self, env) -> SlotEncoder:
+        agents = list(env.possible_agents)
+        if self.hybrid == "residual":  # corrections in [-1, 1] per input component
+            from gymnasium import spaces
+
+            acts = {a: spaces.Box(-1.0, 1.0, env.action_space(a).shape, dtype=np.float32) for a in agents}
+        else:
+            acts = {a: env.action_space(a) for a in agents}
+        enc = SlotEncoder(agents, {a: env.observation_space(a) for a in agents},
+                          acts, agent_id=self.config.get("agent_id", False),
+                          rescale_actions=bool(self.config.get("normalize_actions", False)))
+        if enc.observation_space.shape != self.observation_space.shape:
+            raise ValueError(f"model expects observations of shape {self.observation_space.shape}, "
+                             f"the env gives {enc.observation_space.shape}")
+        return enc
+
+    def parallel_policy(self, env, deterministic: bool = True) -> Callable:
+        enc = self.encoder_for(env)
+
+        def policy(observations: dict) -> dict:
+            acts = self.predict(enc.encode_all(observations), deterministic)
+            return {a: act for a, act in enc.decode_all(acts).items() if a in observations}
+
+        return policy
+
+
+def load_agent(path: str, device: str = "cpu") -> TrainedAgent:
+    """Load a run directory written by :func:`agents.train.train` (or its ``model.zip``, or one of its
+    checkpoints ``<run>/checkpoints/<algo>_<steps>_steps.zip`` with the normaliser saved next to it)."""
+    return TrainedAgent(path, device=device)
