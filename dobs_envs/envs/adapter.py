@@ -11,7 +11,7 @@ PettingZoo ``DObsParallelEnv``      :meth:`~CoreAdapter.agent_observations` (cop
                                                                     :meth:`~CoreAdapter.agent_infos`,
                                                                     :meth:`~CoreAdapter.write_agent_actions`
 Gymnasium ``CentralizedEnv``        :meth:`~CoreAdapter.central_observations` (copy 0)
-                                                                    :meth:`~CoreAdapter.central_infos`,
+                                                                    :meth:`~CoreAdapter.central_info`,
                                                                     :meth:`~CoreAdapter.central_inputs`
 Gymnasium ``DObsVectorEnv``         :meth:`~CoreAdapter.central_observations`
                                                                     :meth:`~CoreAdapter.info_arrays`,
@@ -115,51 +115,55 @@ class CoreAdapter:
         return flat.copy() if self._cat is None else flat[:, self._cat]
 
     # ------------------------------------------------------------------ infos
-    def _diagnostics(self):
+    def _tails(self, extra: dict) -> list:
+        """Per copy: the task error (if the task has one) and then ``extra``, as one dict."""
         c = self.core
-        task = c.task_errors().tolist() if c.task_error_key is not None else None
-        return c.tracking_errors.tolist(), task
+        key = c.task_error_key
+        if key is None:
+            return [extra] * c.num_envs
+        return [{key: t, **extra} for t in c.task_errors().tolist()]
 
     def agent_infos(self, into: list | None = None, **extra) -> list[dict]:
         """One info per (copy, agent), copy-major (``B * K`` dicts): ``estimation_error``,
         ``tracking_error``, ``gamma``, ``gamma_s`` of the agent's linked node, the task error if
         any, then ``extra``; Python floats. ``into``: ``B * K`` dicts updated in place instead."""
         c = self.core
-        K = len(self.agents)
-        te, task = self._diagnostics()
+        te = c.tracking_errors.tolist()
         ee, g, gs = c.estimation_errors.tolist(), c.gamma.tolist(), c.gamma_s.tolist()
-        links, key = c.links, c.task_error_key
-        out = [{} for _ in range(len(te) * K)] if into is None else into
-        for s, info in enumerate(out):
+        tails, links = self._tails(extra), c.links
+        if into is None:
+            return [{"estimation_error": eb[i], "tracking_error": tb, "gamma": gb[i], "gamma_s": gsb[i], **tail}
+                    for eb, tb, gb, gsb, tail in zip(ee, te, g, gs, tails) for i in links]
+        K = len(links)
+        for s, info in enumerate(into):
             b, k = divmod(s, K)
             i = links[k]
             info.update(estimation_error=ee[b][i], tracking_error=te[b], gamma=g[b][i], gamma_s=gs[b][i])
-            if task is not None:
-                info[key] = task[b]
-            if extra:
-                info.update(extra)
-        return out
+            info.update(tails[b])
+        return into
+
+    def central_info(self, b: int = 0, **extra) -> dict:
+        """The info of copy ``b`` (centralised): ``tracking_error`` (float), ``estimation_errors (N,)``,
+        ``gamma (N,)``, ``gamma_s (N,)`` (new arrays), the task error if any (float), then ``extra``."""
+        c = self.core
+        info = {"tracking_error": float(c.tracking_errors[b]), "estimation_errors": c.estimation_errors[b].copy(),
+                "gamma": c.gamma[b].copy(), "gamma_s": c.gamma_s[b].copy()}
+        if c.task_error_key is not None:
+            info[c.task_error_key] = float(c.task_errors()[b])
+        info.update(extra)
+        return info
 
     def central_infos(self, into: list | None = None, **extra) -> list[dict]:
-        """One info per copy (``B`` dicts): ``tracking_error`` (float), ``estimation_errors (N,)``,
-        ``gamma (N,)``, ``gamma_s (N,)`` (rows of copies), the task error if any, then ``extra``.
+        """:meth:`central_info` of every copy (``B`` dicts; the arrays rows of one copy per key).
         ``into``: ``B`` dicts updated in place instead."""
         c = self.core
-        te, task = self._diagnostics()
+        te = c.tracking_errors.tolist()
         ee, g, gs = c.estimation_errors.copy(), c.gamma.copy(), c.gamma_s.copy()
-        key = c.task_error_key
-        if into is None:
-            out = [{"tracking_error": te[b], "estimation_errors": ee[b], "gamma": g[b], "gamma_s": gs[b]}
-                   for b in range(len(te))]
-        else:
-            out = into
-            for b, info in enumerate(out):
-                info.update(tracking_error=te[b], estimation_errors=ee[b], gamma=g[b], gamma_s=gs[b])
+        tails = self._tails(extra)
+        out = [{} for _ in te] if into is None else into
         for b, info in enumerate(out):
-            if task is not None:
-                info[key] = task[b]
-            if extra:
-                info.update(extra)
+            info.update(tracking_error=te[b], estimation_errors=ee[b], gamma=g[b], gamma_s=gs[b])
+            info.update(tails[b])
         return out
 
     def info_arrays(self) -> dict:

@@ -113,7 +113,7 @@ class CentralizedEnv(gym.Env):
         return self._adapter.central_observations(0)  # a new array
 
     def _info(self, reason: int) -> dict:
-        return self._adapter.central_infos(termination_reason=reason)[0]
+        return self._adapter.central_info(0, termination_reason=reason)
 
     def render(self):
         return self.parallel_env.render()
