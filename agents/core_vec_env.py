@@ -7,7 +7,11 @@ One compiled call advances every copy; two slot layouts:
 - **parameter-shared** (``shared=True``): slot ``c * K + k`` is agent ``k`` of copy ``c``
   (one policy for every controller node), observations padded to the widest agent plus
   an optional one-hot agent id, actions truncated to the agent's width and clipped to its
-  bounds -- exactly :class:`agents.vec_env.SlotEncoder`'s encoding (shared with evaluation).
+  bounds -- :class:`agents.vec_env.SlotEncoder`'s own encoding and decoding (``encode_batch``,
+  ``decode_batch``: ``encode``/``decode`` of every slot at once; shared with evaluation).
+
+The core's outputs (observations, infos) and the mapping of actions to inputs come from
+:class:`dobs_envs.envs.adapter.CoreAdapter`, as for the PettingZoo, Gymnasium and vector envs.
 
 Semantics (those of :class:`agents.vec_env.ParallelVecEnv` and of SB3's ``DummyVecEnv``
 over the Gymnasium env):
@@ -31,7 +35,7 @@ over the Gymnasium env):
   autoresets draw from the copy's own generator (reproducible runs).
 - ``rescale_actions``: actions in ``[-1, 1]`` mapped affinely onto each input's bounds (clipped first).
 - The core's options ``normalized_actions`` / ``padded_observations`` apply: the slots' spaces are
-  built from the env's own (``dobs_envs.envs.base.agent_spaces``, ``central_spaces``), and actions
+  built from the env's own (``dobs_envs.envs.adapter.agent_spaces``, ``central_spaces``), and actions
   in the env's units are mapped to inputs by ``core.action_scale``.
 - Wrap it in ``VecMonitor`` for episode returns/lengths in the infos (``agents.train.build_vec_env`` does).
 """
@@ -44,9 +48,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from dobs_envs.envs.base import agent_spaces
+from dobs_envs.envs.adapter import CoreAdapter, agent_spaces, central_spaces
 from dobs_envs.linalg.validation import as_numeric, check_seed
-from dobs_envs.envs.centralized import central_spaces
 
 from .vec_env import SlotEncoder
 
@@ -86,16 +89,12 @@ class CoreVecEnv(VecEnv):
                                        dict(zip(self.agents, act_spaces)), agent_id=agent_id,
                                        rescale_actions=rescale_actions)
             obs_space, act_space = self.encoder.observation_space, self.encoder.action_space
-            A = self.encoder.act_dim
-            # input component j <- slot action (agent k_j, component j - start_k) in the (K * A) row of a copy
-            self._gather = np.concatenate([k * A + np.arange(s.stop - s.start)
-                                           for k, s in enumerate(c.channel_slices)]).astype(np.intp)
-            self._onehot = np.tile(np.eye(K, dtype=np.float32), (B, 1)) if agent_id else None
         else:
             self.encoder = None
             obs_space = central_obs
             act_space = spaces.Box(-1.0, 1.0, central_act.shape, dtype=np.float32) if rescale_actions else central_act
-            self._cat = c.layout.concat_index
+        #: the core's outputs and inputs in the front ends' shapes (dobs_envs.envs.adapter)
+        self._adapter = CoreAdapter(c)
         super().__init__(B * K, obs_space, act_space)
         self._actions = None
         self._copy_seeds: list | None = None
@@ -103,24 +102,18 @@ class CoreVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ encoding
     def _encode(self) -> np.ndarray:
-        c = self.core
         if not self.shared:
-            flat = c.observations.reshape(self.n_copies, -1)
-            return flat.copy() if c.layout.uniform else flat[:, self._cat]
-        o = c.observations.reshape(self.num_envs, c.obs_dim).astype(np.float32)
-        return o if self._onehot is None else np.concatenate([o, self._onehot], axis=1)
+            return self._adapter.central_observations()
+        return self.encoder.encode_batch(self._adapter.padded_observations)
 
     def _decode(self, actions) -> np.ndarray:
-        a = np.asarray(as_numeric(actions, "actions"), dtype=np.float64).reshape(self.n_copies, -1)
-        if self.shared:
-            a = a[:, self._gather]
+        a = np.asarray(as_numeric(actions, "actions"), dtype=np.float64)
+        if self.shared:  # SlotEncoder.decode of every slot: truncated, rescaled, clipped to the agent's box
+            return self._adapter.agent_inputs(self.encoder.decode_batch(a))
+        a = a.reshape(self.n_copies, -1)
         if self.rescale_actions:
             a = self._lo + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (self._hi - self._lo)
-        if self.shared:  # as SlotEncoder.decode: clipped to the agent's box, in its float32 dtype
-            a = np.clip(a, self._lo, self._hi).astype(np.float32).astype(np.float64)
-        if self.core.normalized_actions:
-            a = a * self.core.action_scale
-        return a
+        return self._adapter.central_inputs(a)
 
     def slot_info(self, slot: int) -> tuple[int, str]:
         """``slot -> (copy index, agent name)`` (centralised: agent ``"all"``)."""
@@ -151,23 +144,10 @@ class CoreVecEnv(VecEnv):
         infos = [{"TimeLimit.truncated": t, "termination_reason": r}
                  for r, t in zip(reasons, truncs) for _ in range(K)]
         if self.diagnostics:
-            c = self.core
-            te = c.tracking_errors.tolist()
-            task = c.task_errors().tolist() if c.task_error_key is not None else None
             if self.shared:
-                ee, g, gs = c.estimation_errors.tolist(), c.gamma.tolist(), c.gamma_s.tolist()
-                links = c.links
-                for s_, info in enumerate(infos):
-                    b, k = divmod(s_, K)
-                    i = links[k]
-                    info.update(estimation_error=ee[b][i], tracking_error=te[b], gamma=g[b][i], gamma_s=gs[b][i])
+                self._adapter.agent_infos(into=infos)
             else:
-                ee, g, gs = c.estimation_errors.copy(), c.gamma.copy(), c.gamma_s.copy()
-                for b, info in enumerate(infos):
-                    info.update(tracking_error=te[b], estimation_errors=ee[b], gamma=g[b], gamma_s=gs[b])
-            if task is not None:
-                for s_, info in enumerate(infos):
-                    info[c.task_error_key] = task[s_ // K]
+                self._adapter.central_infos(into=infos)
         return infos
 
     def step_async(self, actions: np.ndarray) -> None:

@@ -118,6 +118,17 @@ class SlotEncoder:
             ahi[:] = 1.0
         self.action_space = spaces.Box(alo, ahi, dtype=np.float32)
         self._eye = np.eye(M, dtype=np.float32)
+        # each agent's own action bounds (float64 of its Box), zero beyond its width: rows of decode_batch
+        self._act_lo = np.zeros((M, self.act_dim))
+        self._act_hi = np.zeros((M, self.act_dim))
+        for j, (a, d) in enumerate(zip(self.agents, self.act_dims)):
+            sp = self.act_spaces[a]
+            self._act_lo[j, :d] = sp.low.reshape(-1).astype(np.float64)
+            self._act_hi[j, :d] = sp.high.reshape(-1).astype(np.float64)
+        #: the agents' actions concatenated (slot order) <- (agent, component) of a (M * act_dim) row
+        self._act_gather = np.concatenate([j * self.act_dim + np.arange(d) for j, d in enumerate(self.act_dims)])
+        self._act_dtype = np.result_type(*[self.act_spaces[a].dtype for a in self.agents])
+        self._onehots: dict = {}
 
     @property
     def n_agents(self) -> int:
@@ -136,16 +147,47 @@ class SlotEncoder:
         """``{agent: obs}`` -> (M, width) in slot order (missing agents give zeros)."""
         return np.stack([self.encode(j, obs[a]) if a in obs else self.encode(j, np.zeros(0)) for j, a in enumerate(self.agents)])
 
+    def encode_batch(self, obs) -> np.ndarray:
+        """``(C, M, d)`` observations of every agent of ``C`` copies (``d <= obs_dim``; each agent's
+        observation in its first entries, zeros after) -> ``(C * M, width)`` slot observations in slot
+        order: :meth:`encode` of every slot, vectorised."""
+        obs = np.asarray(obs)
+        C, M, d = obs.shape
+        if M != self.n_agents or d > self.obs_dim:
+            raise ValueError(f"obs must have shape (copies, {self.n_agents}, <= {self.obs_dim}), got {obs.shape}")
+        o = obs.reshape(C * M, d).astype(np.float32)
+        if d < self.obs_dim:
+            o = np.concatenate([o, np.zeros((C * M, self.obs_dim - d), np.float32)], axis=1)
+        if not self.agent_id:
+            return o
+        onehot = self._onehots.get(C)
+        if onehot is None:
+            onehot = self._onehots[C] = np.tile(self._eye, (C, 1))
+        return np.concatenate([o, onehot], axis=1)
+
+    @staticmethod
+    def _decode_rows(act, lo, hi, rescale: bool) -> np.ndarray:
+        """Shared actions (float64, truncated to the agents' widths) -> the agents' actions (float64):
+        mapped from ``[-1, 1]`` onto ``[lo, hi]`` (``rescale``), clipped to ``[lo, hi]``."""
+        if rescale:
+            act = lo + (np.clip(act, -1.0, 1.0) + 1.0) * 0.5 * (hi - lo)
+        return np.clip(act, lo, hi)
+
     def decode(self, j: int, action) -> np.ndarray:
         """Shared action of slot agent ``j`` -> that agent's action (truncated, clipped)."""
-        a = self.agents[j]
-        sp = self.act_spaces[a]
-        act = np.asarray(action, dtype=np.float64).reshape(-1)[: self.act_dims[j]]
-        lo, hi = sp.low.reshape(-1).astype(np.float64), sp.high.reshape(-1).astype(np.float64)
-        if self.rescale_actions:
-            act = lo + (np.clip(act, -1.0, 1.0) + 1.0) * 0.5 * (hi - lo)
-        act = np.clip(act, lo, hi)
+        sp = self.act_spaces[self.agents[j]]
+        d = self.act_dims[j]
+        act = np.asarray(action, dtype=np.float64).reshape(-1)[:d]
+        act = self._decode_rows(act, self._act_lo[j, :d], self._act_hi[j, :d], self.rescale_actions)
         return act.reshape(sp.shape).astype(sp.dtype, copy=False)
+
+    def decode_batch(self, actions) -> np.ndarray:
+        """Shared actions of every slot of ``C`` copies, ``(C * M, act_dim)`` in slot order -> ``(C,
+        sum act_dims)``: each copy's agents' actions (:meth:`decode`) concatenated in agent order, in
+        the agents' common dtype (vectorised; the same arithmetic element by element)."""
+        act = np.asarray(actions, dtype=np.float64).reshape(-1, self.n_agents, self.act_dim)
+        act = self._decode_rows(act, self._act_lo, self._act_hi, self.rescale_actions)
+        return act.reshape(act.shape[0], -1)[:, self._act_gather].astype(self._act_dtype, copy=False)
 
     def decode_all(self, actions) -> dict:
         actions = np.asarray(actions)

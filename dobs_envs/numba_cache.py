@@ -11,7 +11,7 @@ no error (seen in a development checkout on 2026-12-02: the tests passed on the 
 module's cache directory (wherever numba puts it: ``__pycache__`` beside the file,
 ``NUMBA_CACHE_DIR``, or the user-wide fallback), removes that module's cache files before any
 of them is loaded. Every kernel module calls it on import; it does its work once per process
-(reading five source files, well under a millisecond) and never raises: at worst numba
+(reading seven source files, well under a millisecond) and never raises: at worst numba
 compiles again.
 """
 from __future__ import annotations
@@ -22,9 +22,13 @@ import os
 
 __all__ = ["KERNEL_MODULES", "ensure_fresh", "fingerprint", "cache_dir"]
 
-#: modules of ``dobs_envs`` (paths relative to the package) whose kernels numba caches; each
-#: one's cached code may hold code compiled from the others
-KERNEL_MODULES = ("sim/kernel.py", "envs/step_kernel.py", "envs/features.py", "control/kernel.py", "rollout.py")
+#: modules of ``dobs_envs`` (paths relative to the package) whose source is compiled into the cached
+#: kernels: those whose kernels numba caches (each one's cached code may hold code compiled from the
+#: others), then the declarations of the kernels' arguments (``sim/kernel_args.py``) and the generator
+#: of their compiled unpacking (``packing.py``): numba caches that generated code under the kernel
+#: module's file, which does not change when a declaration does
+KERNEL_MODULES = ("sim/kernel.py", "envs/step_kernel.py", "envs/features.py", "control/kernel.py", "rollout.py",
+                  "sim/kernel_args.py", "packing.py")
 
 #: name of the file, in a module's cache directory, that records the fingerprint its cache was built from
 STAMP = "dobs_envs_kernels.fingerprint"

@@ -20,6 +20,7 @@ once on the grid ``t_k = k dt`` before the loop.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -88,14 +89,43 @@ def _steps(sc, dt, t_end):
     return dt, t_end, max(1, int(round(t_end / dt)))
 
 
+class LoopArgs(NamedTuple):
+    """The constants of one compiled closed-loop run (:func:`_rollout_kernel`)."""
+
+    oracle: bool  # apply the law to the true state
+    eps: np.ndarray  # (B,) boundary layer per copy, eq. (hepsfunc)
+    phi_beta: np.ndarray  # (B,) adaptation gain per copy, eq. (adlawbeta)
+    decay: float  # exp(-sigma_beta dt)
+    gain: float  # (1 - decay) / sigma_beta (dt when sigma_beta = 0)
+    cmd: np.ndarray  # (steps, m) prescribed input on the grid (open loop)
+    ref: np.ndarray  # (steps, m) reference command on the grid
+    steps: int  # Euler steps
+    stride: int  # record every stride-th step
+
+
+class Recording(NamedTuple):
+    """The samples :func:`_rollout_kernel` writes, ``(B, R, ...)`` (the fields of :class:`Trajectory`)."""
+
+    x: np.ndarray  # (B, R, n)
+    x_r: np.ndarray  # (B, R, n)
+    est_err: np.ndarray  # (B, R, N)
+    gamma: np.ndarray  # (B, R, N)
+    gamma_s: np.ndarray  # (B, R, N)
+    u: np.ndarray  # (B, R, m)
+    beta: np.ndarray  # (B, R, Nc)
+
+
 @numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, code, oracle, row_link, K, BtP, starts, ends,
-                    eps, phi_beta, decay, gain, cmd, ref, steps, stride,
-                    rec_x, rec_xr, rec_ee, rec_g, rec_gs, rec_u, rec_beta):
+def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
+    """Run ``loop.steps`` Euler steps of every copy in place (state ``x .. x_r``, controller gains
+    ``beta (B, Nc)``), the law :class:`~dobs_envs.control.kernel.LawArrays` ``law`` applied at
+    every step, recording into :class:`Recording` ``rec`` every ``loop.stride`` steps."""
     ka = unpack_kernel_args(KF, KI)
-    C, G_bar = ka[3], ka[6]
+    C, G_bar = ka.C, ka.G_bar
+    oracle, eps, phi_beta, decay, gain = loop.oracle, loop.eps, loop.phi_beta, loop.decay, loop.gain
+    cmd, ref, steps, stride = loop.cmd, loop.ref, loop.steps, loop.stride
     Bsz, N, n = z.shape[0], z.shape[1], z.shape[2]
-    m = K.shape[0]
+    m = law.K.shape[0]
     p = C.shape[1]
     xhat = np.empty((N, n))
     y = np.empty(p)
@@ -104,7 +134,7 @@ def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, code, oracle, ro
     w = np.empty(m)
     s = 0
     for k in range(steps + 1):
-        rec = k % stride == 0
+        record = k % stride == 0
         for b in range(Bsz):
             xb = x[b]
             # eq. (localmeasure) y_i = C_i x, eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
@@ -119,26 +149,25 @@ def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, code, oracle, ro
                     for q in range(p):
                         acc += G_bar[i, c, q] * y[q]
                     xhat[i, c] = acc
-            if rec:
-                rec_x[b, s] = xb
-                rec_xr[b, s] = x_r[b]
+            if record:
+                rec.x[b, s] = xb
+                rec.x_r[b, s] = x_r[b]
                 for i in range(N):
                     e2 = 0.0
                     for c in range(n):
                         d = xhat[i, c] - xb[c]
                         e2 += d * d
-                    rec_ee[b, s, i] = np.sqrt(e2)
-                rec_g[b, s] = gamma[b]
-                rec_gs[b, s] = gamma_s[b]
-                rec_beta[b, s] = beta[b]
+                    rec.est_err[b, s, i] = np.sqrt(e2)
+                rec.gamma[b, s] = gamma[b]
+                rec.gamma_s[b, s] = gamma_s[b]
+                rec.beta[b, s] = beta[b]
             if k < steps:
-                law_copy(code, xhat, xb, oracle, row_link, K, BtP, starts, ends, ref[k], cmd[k], beta[b], eps[b],
-                         phi_beta[b], decay, gain, u[b], w)
+                law_copy(law, xhat, xb, oracle, ref[k], cmd[k], beta[b], eps[b], phi_beta[b], decay, gain, u[b], w)
                 for j in range(m):
                     r[b, j] = ref[k, j]
-            if rec:
-                rec_u[b, s] = u[b]  # the input applied from t_k on (at the last sample: the one before)
-        if rec:
+            if record:
+                rec.u[b, s] = u[b]  # the input applied from t_k on (at the last sample: the one before)
+        if record:
             s += 1
         if k < steps:
             advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, Bsz)
@@ -180,32 +209,31 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
     state = sc.initial_state(params, batch=batch)
     ctrl = paper_policy(sc)
     n, N, m = params.n_states, params.n_nodes, params.n_inputs
-    code, row_link, K, BtP, starts, ends, beta0, sigma_b, phi_b, eps0 = law_arrays(ctrl, m, n)
-    eps = _per_copy("epsilon", epsilon, eps0, batch)
-    phib = _per_copy("phi_beta", phi_beta, phi_b if phi_b > 0 else 1.0, batch)
+    law = law_arrays(ctrl, m, n)
+    sigma_b = law.sigma_beta
     decay = float(np.exp(-sigma_b * dt))
-    gain = (1.0 - decay) / sigma_b if sigma_b > 0 else dt
     t_grid = np.arange(steps) * dt
-    cmd = _signal(getattr(sc, "prescribed_input", None) if code == 0 else None, t_grid, m)
-    ref = _signal(sc.reference, t_grid, m)
-    Nc = starts.shape[0]
-    beta = np.full((batch, Nc), beta0)
+    loop = LoopArgs(oracle=bool(oracle), eps=_per_copy("epsilon", epsilon, law.epsilon, batch),
+                    phi_beta=_per_copy("phi_beta", phi_beta, law.phi_beta if law.phi_beta > 0 else 1.0, batch),
+                    decay=decay, gain=(1.0 - decay) / sigma_b if sigma_b > 0 else dt,
+                    cmd=_signal(getattr(sc, "prescribed_input", None) if law.code == 0 else None, t_grid, m),
+                    ref=_signal(sc.reference, t_grid, m), steps=steps, stride=stride)
+    Nc = law.starts.shape[0]
+    beta = np.full((batch, Nc), law.beta0)
     R = steps // stride + 1
-    rec = dict(x=np.empty((batch, R, n)), x_r=np.empty((batch, R, n)), est_err=np.empty((batch, R, N)),
-               gamma=np.empty((batch, R, N)), gamma_s=np.empty((batch, R, N)), u=np.zeros((batch, R, m)),
-               beta=np.empty((batch, R, Nc)))
+    rec = Recording(x=np.empty((batch, R, n)), x_r=np.empty((batch, R, n)), est_err=np.empty((batch, R, N)),
+                    gamma=np.empty((batch, R, N)), gamma_s=np.empty((batch, R, N)), u=np.zeros((batch, R, m)),
+                    beta=np.empty((batch, R, Nc)))
     x, z, g, gs, v, xr = (np.array(a, dtype=float, order="C") for a in
                           (state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r))
-    _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, code, bool(oracle), row_link, K, BtP,
-                    starts, ends, eps, phib, decay, gain, cmd, ref, steps, stride,
-                    rec["x"], rec["x_r"], rec["est_err"], rec["gamma"], rec["gamma_s"], rec["u"], rec["beta"])
+    _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec)
     if steps % stride == 0 and R > 1:
-        rec["u"][:, -1] = rec["u"][:, -2]
+        rec.u[:, -1] = rec.u[:, -2]
     t = np.arange(R) * (dt * stride)
-    has_beta = code in (3, 4)
-    return [Trajectory(t=t, x=rec["x"][b], x_r=rec["x_r"][b] if sc.reference is not None else None,
-                       est_err=rec["est_err"][b], gamma=rec["gamma"][b], gamma_s=rec["gamma_s"][b], u=rec["u"][b],
-                       beta=rec["beta"][b] if has_beta else None) for b in range(batch)]
+    has_beta = law.code in (3, 4)
+    return [Trajectory(t=t, x=rec.x[b], x_r=rec.x_r[b] if sc.reference is not None else None,
+                       est_err=rec.est_err[b], gamma=rec.gamma[b], gamma_s=rec.gamma_s[b], u=rec.u[b],
+                       beta=rec.beta[b] if has_beta else None) for b in range(batch)]
 
 
 def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None, oracle: bool = False,

@@ -224,3 +224,31 @@ def test_rescaled_actions_map_onto_each_agents_bounds():
     got = venv.envs[0].received[-1]
     np.testing.assert_allclose(got["a0"], [1.0])
     np.testing.assert_allclose(got["a1"], [0.0, -2.0])
+
+
+@pytest.mark.parametrize("agent_id,rescale", [(False, False), (True, True)])
+def test_batch_encoding_and_decoding_are_those_of_every_slot(agent_id, rescale):
+    """SlotEncoder.encode_batch / decode_batch (what CoreVecEnv uses) give encode / decode of every slot,
+    bit for bit, with agents of different widths and bounds that are not round numbers."""
+    agents = ["a", "b", "c"]
+    obs = {"a": spaces.Box(-1.0, 1.0, (4,)), "b": spaces.Box(-2.0, 3.0, (2,)), "c": spaces.Box(-5.0, 5.0, (3,))}
+    act = {"a": spaces.Box(-np.float32(1.7), np.float32(1.7), (2,)), "b": spaces.Box(-0.3, 2.9, (1,)),
+           "c": spaces.Box(np.float32(-np.pi), np.float32(np.e), (3,))}
+    enc = SlotEncoder(agents, obs, act, agent_id=agent_id, rescale_actions=rescale)
+    rng = np.random.default_rng(0)
+    C = 4
+    o = np.zeros((C, 3, 4))
+    for j, a in enumerate(agents):
+        o[:, j, :obs[a].shape[0]] = rng.normal(size=(C, obs[a].shape[0]))
+    want = np.stack([enc.encode(j, o[c, j, :obs[a].shape[0]]) for c in range(C) for j, a in enumerate(agents)])
+    got = enc.encode_batch(o)
+    assert got.dtype == want.dtype == np.float32
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(enc.encode_batch(o[:, :, :3])[:, :3], want[:, :3])  # narrower padded rows
+    shared = rng.uniform(-4.0, 4.0, size=(C * 3, enc.act_dim)).astype(np.float32)
+    want = np.stack([np.concatenate([enc.decode(j, shared[c * 3 + j]) for j in range(3)]) for c in range(C)])
+    got = enc.decode_batch(shared)
+    assert got.dtype == want.dtype == np.float32 and got.shape == (C, 6)
+    np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match=r"obs must have shape \(copies, 3, <= 4\)"):
+        enc.encode_batch(np.zeros((2, 2, 4)))

@@ -13,8 +13,8 @@ import dobs_envs  # noqa: F401
 from agents.core_vec_env import CoreVecEnv
 from agents.training_envs import build_vec_env, core_of
 from agents.vec_env import ParallelVecEnv
-from dobs_envs import hetero_mas_v0, tracking_v0
-from dobs_envs.envs import HeteroMASEnv, TrackingEnv
+from dobs_envs import hetero_mas_v0, random_network_v0, tracking_v0
+from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
 
 
 def _same_streams(va, vb, actions):
@@ -61,6 +61,21 @@ def test_shared_matches_parallel_vec_env(agent_id, rescale):
     acts = rng.uniform(-1.5, 1.5, size=(steps, 10, 1)).astype(np.float32) * (1 if rescale else 8)
     _same_streams(va, vb, acts)
 
+
+def test_shared_rescaled_actions_decode_as_slot_encoder_with_bounds_that_are_not_float32():
+    """RandomNetwork's calibrated bounds are not float32 numbers; the shared slots still map actions
+    exactly as SlotEncoder.decode does with the agents' float32 Boxes (ParallelVecEnv, evaluation)."""
+    n, steps = 3, 10
+    core = RandomNetworkEnv.make_core(n, max_cycles=4)
+    assert np.any(core.action_bound.astype(np.float32).astype(np.float64) != core.action_bound)
+    va = CoreVecEnv(core, shared=True, agent_id=True, rescale_actions=True)
+    vb = ParallelVecEnv([lambda: random_network_v0.parallel_env(max_cycles=4) for _ in range(n)], agent_id=True,
+                        rescale_actions=True)
+    assert va.action_space == vb.action_space and va.num_envs == vb.num_envs
+    va.seed(5)
+    vb.seed(5)
+    acts = np.random.default_rng(4).uniform(-1.2, 1.2, size=(steps,) + (va.num_envs,) + va.action_space.shape)
+    _same_streams(va, vb, acts.astype(np.float32))
 
 def test_terminal_observation_truncation_and_autoreset():
     core = TrackingEnv.make_core(2, max_cycles=4, state_bound=15.0)

@@ -13,6 +13,7 @@ with eq. hfunc), 4 adaptive boundary-layer sliding mode (eqs. hepsfunc, adlawbet
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -21,7 +22,7 @@ from ..numba_cache import ensure_fresh
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
-__all__ = ["LAW_CODES", "law_copy", "law_arrays"]
+__all__ = ["LAW_CODES", "LawArrays", "law_copy", "law_arrays"]
 
 #: controller kind -> integer code of :func:`law_copy`
 LAW_CODES = {"open_loop": 0, "feedback": 1, "tracking": 2, "sliding_mode": 3, "adaptive_sliding_mode": 4}
@@ -30,45 +31,56 @@ LAW_CODES = {"open_loop": 0, "feedback": 1, "tracking": 2, "sliding_mode": 3, "a
 _njit = numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 
-def law_arrays(ctrl, m: int, n: int):
-    """Constant arrays of :func:`law_copy` for a controller of :mod:`dobs_envs.control.laws`.
+class LawArrays(NamedTuple):
+    """A controller of :mod:`dobs_envs.control.laws` as :func:`law_copy` reads it (:func:`law_arrays`)."""
 
-    Returns ``(code, row_link (m,), K (m, n), BtP (m, n), starts (Nc,), ends (Nc,), beta0,
-    sigma_beta, phi_beta, epsilon)``; for the open-loop :class:`PrescribedInput` the matrices
-    are zeros and ``Nc = 0``.
-    """
+    code: int  # LAW_CODES
+    row_link: np.ndarray  # (m,) int64 observer node feeding input row j
+    K: np.ndarray  # (m, n) stacked K^k
+    BtP: np.ndarray  # (m, n) stacked (B^k)^T P
+    starts: np.ndarray  # (Nc,) int64 first column of each channel
+    ends: np.ndarray  # (Nc,) int64 end of each channel
+    beta0: float  # initial (code 3: fixed) gain, eqs. (idealslidinglaw), (adlawbeta)
+    sigma_beta: float  # leakage of eq. (adlawbeta)
+    phi_beta: float  # adaptation gain of eq. (adlawbeta)
+    epsilon: float  # boundary layer of eq. (hepsfunc)
+
+
+def law_arrays(ctrl, m: int, n: int) -> LawArrays:
+    """The :class:`LawArrays` of a controller of :mod:`dobs_envs.control.laws`; for the open-loop
+    :class:`PrescribedInput` the matrices are zeros and ``Nc = 0``."""
     kind = getattr(ctrl, "kind", "open_loop")
     code = LAW_CODES[kind]
     if code == 0:
         z = np.zeros((m, n))
-        return (code, np.zeros(m, np.int64), z, z, np.zeros(0, np.int64), np.zeros(0, np.int64),
-                0.0, 0.0, 0.0, 1.0)
+        return LawArrays(code=code, row_link=np.zeros(m, np.int64), K=z, BtP=z, starts=np.zeros(0, np.int64),
+                         ends=np.zeros(0, np.int64), beta0=0.0, sigma_beta=0.0, phi_beta=0.0, epsilon=1.0)
     starts = np.asarray(ctrl.starts, dtype=np.int64)
     ends = np.append(starts[1:], m).astype(np.int64)
     BtP = ctrl.BtP if ctrl.BtP is not None else np.zeros((m, n))
-    return (code, np.asarray(ctrl.row_link, dtype=np.int64), np.ascontiguousarray(ctrl.K, dtype=float),
-            np.ascontiguousarray(BtP, dtype=float), starts, ends, ctrl.beta0, ctrl.sigma_beta, ctrl.phi_beta,
-            ctrl.epsilon)
+    return LawArrays(code=code, row_link=np.asarray(ctrl.row_link, dtype=np.int64),
+                     K=np.ascontiguousarray(ctrl.K, dtype=float), BtP=np.ascontiguousarray(BtP, dtype=float),
+                     starts=starts, ends=ends, beta0=ctrl.beta0, sigma_beta=ctrl.sigma_beta, phi_beta=ctrl.phi_beta,
+                     epsilon=ctrl.epsilon)
 
 
 @_njit
-def law_copy(code, xhat, x, oracle, row_link, K, BtP, starts, ends, r, cmd, beta, eps, phi_beta, decay, gain,
-             u, w):
+def law_copy(law, xhat, x, oracle, r, cmd, beta, eps, phi_beta, decay, gain, u, w):
     """The input of one copy, in place: ``u (m,)``; updates ``beta (Nc,)`` in place.
 
     Parameters
     ----------
-    code : int, :data:`LAW_CODES`.
+    law : :class:`LawArrays` (``code``, ``row_link``, ``K``, ``BtP``, ``starts``, ``ends`` are read;
+        the per-copy ``eps``, ``phi_beta`` below replace its scalars).
     xhat : (N, n) estimates of all observer nodes; ``x (n,)`` the true state (used for every
         row when ``oracle``).
-    row_link : (m,) observer node feeding input row ``j``. ``K``, ``BtP`` : (m, n) stacked
-        ``K^k`` and ``(B^k)^T P``. ``starts``/``ends`` : (Nc,) column range of each channel.
     r, cmd : (m,) reference command (tracking) and prescribed input (open loop).
     beta : (Nc,) adaptive gains (fixed gains for code 3). ``eps``, ``phi_beta`` : boundary
         layer and adaptation gain (code 4); ``decay = exp(-sigma T)``, ``gain = (1 - decay)/sigma``
         (``T`` when ``sigma = 0``): the exact leakage step of :mod:`dobs_envs.control.laws`.
     w : (m,) scratch.
     """
+    code, row_link, K, BtP, starts, ends = law.code, law.row_link, law.K, law.BtP, law.starts, law.ends
     m = u.shape[0]
     n = K.shape[1]
     if code == 0:

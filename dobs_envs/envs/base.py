@@ -19,7 +19,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from ..linalg.validation import NUMERIC_KINDS, as_numeric, check_seed
+from ..linalg.validation import check_seed
+from .adapter import CoreAdapter, agent_spaces
 from .distributions import DEFAULT_INIT_NOISE
 from .options import RENDER_MODES, EnvOptions
 from .rendering import LivePlot
@@ -36,24 +37,6 @@ _CORE_ATTRS = frozenset({
     "n_unknown", "has_reference", "dt", "substeps", "control_period", "action_bound", "obs_dtype", "Q", "R",
     "state_bound", "termination_penalty", "reward_kind", "cost_scale", "disturbance", "disturbance_amplitude",
     "init_noise", "penalty_cycles"})
-
-
-def agent_spaces(core) -> tuple[list, list]:
-    """``(observation Boxes, action Boxes)`` of the agents of ``core``, in agent order.
-
-    Actions: ``Box(-b_k, b_k, (m_k,), float32)`` with channel ``k``'s bounds, or with
-    ``normalized_actions`` the common ``Box(-1, 1, (M,), float32)`` (``M = max_k m_k``).
-    Observations: ``Box(low_k, high_k)`` of agent ``k``'s width (``padded_observations``: the
-    same Box for every agent, padded and masked where the widths differ).
-    """
-    obs = [spaces.Box(*core.observation_bounds(k), dtype=core.obs_dtype) for k in range(core.n_agents)]
-    if core.normalized_actions:
-        M = int(core.agent_action_widths[0])
-        act = [spaces.Box(-1.0, 1.0, (M,), dtype=np.float32) for _ in range(core.n_agents)]
-    else:
-        b = core.action_bound.astype(np.float32)
-        act = [spaces.Box(-b[s], b[s], dtype=np.float32) for s in core.channel_slices]
-    return obs, act
 
 
 class DObsParallelEnv(EnvSpec, ParallelEnv):
@@ -79,10 +62,8 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         self.possible_agents = list(c.agents)
         self.agents = []
         self._agent_id = {a: k for k, a in enumerate(self.possible_agents)}
-        self._widths = tuple(int(w) for w in c.agent_action_widths)
-        self._offsets = tuple(int(o) for o in np.cumsum((0,) + self._widths[:-1]))
-        self._shapes = [(w,) for w in self._widths]
-        self._obs_w = tuple(int(w) for w in c.obs_widths)
+        #: the core's outputs as agent dicts, the agents' actions as inputs
+        self._adapter = CoreAdapter(c)
         obs_spaces, act_spaces = agent_spaces(c)
         self._action_spaces = dict(zip(self.possible_agents, act_spaces))
         self._obs_spaces = dict(zip(self.possible_agents, obs_spaces))
@@ -161,18 +142,9 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode (no live agents); call reset() first")
         buf = self._u if self._a is None else self._a
-        try:  # fast path: exactly the agents, right shapes, float/int arrays -> one concatenate into buf
-            vals = [actions[a] for a in self.possible_agents]
-            ok = (len(actions) == len(vals) and [v.shape for v in vals] == self._shapes
-                  and all(v.dtype.kind in NUMERIC_KINDS for v in vals))  # bool/complex: refused by the slow path
-            if ok:
-                np.concatenate(vals, out=buf[0], casting="same_kind")
-        except (KeyError, TypeError, ValueError, AttributeError):
-            ok = False
-        if not ok:
-            self._parse_actions(actions, buf[0])
+        self._adapter.write_agent_actions(actions, buf[0])
         if self._a is not None:
-            self.core.agent_inputs(self._a, out=self._u)
+            self._adapter.agent_inputs(self._a, out=self._u)
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
         agents = self.possible_agents
@@ -184,50 +156,19 @@ class DObsParallelEnv(EnvSpec, ParallelEnv):
             self.show(force=term or trunc)
         return out
 
-    def _parse_actions(self, actions, u):
-        """Validate ``actions`` agent by agent (errors name the agent) and write them into ``u``
-        (the agents' actions concatenated)."""
-        if not isinstance(actions, dict):
-            raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        new = u.copy()
-        for agent, a in actions.items():
-            k = self._agent(agent)
-            arr = as_numeric(a, f"action of agent {agent!r}")
-            if arr.shape != (self._widths[k],):
-                raise ValueError(f"action of agent {agent!r} must have shape ({self._widths[k]},), got {arr.shape}")
-            new[self._offsets[k]:self._offsets[k] + self._widths[k]] = arr
-        missing = [a for a in self.possible_agents if a not in actions]
-        if missing:
-            raise ValueError(f"missing action(s) for agent(s) {missing}")
-        u[:] = new
-
     def actions_from_inputs(self, u) -> dict:
         """``{agent: action}`` that applies the inputs ``u (m,)``: the channels' parts of ``u``, or with
         ``normalized_actions`` divided by their bounds and zero-padded (for controllers that compute
         inputs, e.g. :mod:`baselines.policies`)."""
-        c = self.core
-        u = np.asarray(u, dtype=np.float64).reshape(c.n_inputs)
-        if not c.normalized_actions:
-            return {a: u[s].copy() for a, s in zip(self.possible_agents, c.channel_slices)}
-        flat = np.zeros(int(c.agent_action_widths.sum()))
-        flat[c.action_gather] = u / c.action_scale
-        return {a: flat[o:o + w] for a, o, w in zip(self.possible_agents, self._offsets, self._widths)}
+        return self._adapter.actions_from_inputs(u)
 
     def _observations(self) -> dict:
         """Per-agent observations: views into this step's fresh copy of the core's (K, D) row."""
-        o = self.core.observations[0].copy()
-        return {a: o[k, :w] for k, (a, w) in enumerate(zip(self.possible_agents, self._obs_w))}
+        return self._adapter.agent_observations(0)
 
     def _infos(self, reason: int) -> dict:
-        """Per-agent infos: the same numeric keys from ``reset`` on (see :data:`INFO_KEYS`)."""
-        c = self.core
-        ee, te = c.estimation_errors[0].tolist(), float(c.tracking_errors[0])
-        g, gs = c.gamma[0].tolist(), c.gamma_s[0].tolist()
-        extra = {"termination_reason": reason}
-        if c.task_error_key is not None:
-            extra = {c.task_error_key: float(c.task_errors()[0]), **extra}
-        return {a: {"estimation_error": ee[i], "tracking_error": te, "gamma": g[i], "gamma_s": gs[i], **extra}
-                for a, i in zip(self.possible_agents, c.links)}
+        """Per-agent infos: the same numeric keys from ``reset`` on (see :mod:`dobs_envs.envs.adapter`)."""
+        return dict(zip(self.possible_agents, self._adapter.agent_infos(termination_reason=reason)))
 
     # ------------------------------------------------------------------ state / diagnostics / render
     def state(self) -> np.ndarray:

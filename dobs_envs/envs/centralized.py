@@ -50,30 +50,13 @@ import math
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from ..linalg.validation import as_numeric, check_seed
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
+from .adapter import CoreAdapter, central_spaces
 from .base import DObsParallelEnv
 
 __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "reject_horizon_options"] + [f"make_{name}" for name in ENVIRONMENTS]
-
-
-def central_spaces(core):
-    """``(observation Box, action Box, agent observation slices)`` of the centralised view of ``core``:
-    the agents' observations concatenated in agent order (``padded_observations``: each as the
-    parallel env gives it, padded and masked where the widths differ), all inputs stacked (``normalized_actions``: ``Box(-1, 1, (m,))``, input ``j`` scaled
-    by its bound, ``core.action_scale``)."""
-    lows, highs, sl, pos = [], [], [], 0
-    for k, w in enumerate(core.obs_widths):
-        lo, hi = core.observation_bounds(k)
-        lows.append(lo)
-        highs.append(hi)
-        sl.append(slice(pos, pos + int(w)))
-        pos += int(w)
-    b = np.ones(core.n_inputs, np.float32) if core.normalized_actions else core.action_bound.astype(np.float32)
-    return (spaces.Box(np.concatenate(lows), np.concatenate(highs), dtype=core.obs_dtype),
-            spaces.Box(-b, b, dtype=np.float32), tuple(sl))
 
 
 class CentralizedEnv(gym.Env):
@@ -90,7 +73,8 @@ class CentralizedEnv(gym.Env):
         self.agents = list(pe.possible_agents)
         self.observation_space, self.action_space, self.agent_observation_slices = central_spaces(c)
         self.agent_action_slices = tuple(c.channel_slices)
-        self._cat = c.layout.concat_index
+        #: the core's outputs as the centralised agent's, its actions as inputs
+        self._adapter = CoreAdapter(c)
         self._u = np.zeros((1, c.n_inputs))
 
     # ------------------------------------------------------------------ API
@@ -118,7 +102,7 @@ class CentralizedEnv(gym.Env):
         a = as_numeric(action, "action")
         if a.shape != self._u.shape[1:]:
             raise ValueError(f"action must have shape {self._u.shape[1:]} (all agents' inputs stacked), got {a.shape}")
-        self._u[0] = a * self.core.action_scale if self.core.normalized_actions else a
+        self._u[0] = self._adapter.central_inputs(a)
         res = self.core.advance(self._u)
         term, trunc = bool(res.terminated[0]), bool(res.truncated[0])
         if self.render_mode == "human":
@@ -126,17 +110,10 @@ class CentralizedEnv(gym.Env):
         return self._obs(), float(res.reward[0]), term, trunc, self._info(int(res.reason[0]))
 
     def _obs(self) -> np.ndarray:
-        flat = self.core.observations[0].reshape(-1)
-        return flat.copy() if self.core.layout.uniform else flat[self._cat]  # a new array
+        return self._adapter.central_observations(0)  # a new array
 
     def _info(self, reason: int) -> dict:
-        c = self.core
-        info = {"tracking_error": float(c.tracking_errors[0]), "estimation_errors": c.estimation_errors[0].copy(),
-                "gamma": c.gamma[0].copy(), "gamma_s": c.gamma_s[0].copy()}
-        if c.task_error_key is not None:
-            info[c.task_error_key] = float(c.task_errors()[0])
-        info["termination_reason"] = reason
-        return info
+        return self._adapter.central_info(0, termination_reason=reason)
 
     def render(self):
         return self.parallel_env.render()

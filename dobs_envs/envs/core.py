@@ -59,14 +59,15 @@ import numpy as np
 
 from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric, check_seed
 from ..sim import SimParams, SimState
+from ..sim.kernel_args import StateArrays
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
 from .features import pack_static, write_features
 from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions
 from ..sim.kernel import TILE
-from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, advance_batch,
-                          advance_range, first_non_finite)
+from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
+                          advance_batch, advance_range, first_non_finite)
 
 
 #: reward shape -> code passed to the compiled step (0 quadratic, 1 log, 2 sqrt)
@@ -241,11 +242,15 @@ class EnvCore:
             ref[0], ref[1], ref[2] = sc.reference.amplitude, sc.reference.frequency, sc.reference.phase
         self._ka = p.kernel_packed
         self._SF, self._SI = pack_static(p.C, p.G_bar, ref, self.Q, self.R, L.offsets(p_i), L.padded_index, L.size)
-        big = float(np.finfo(self.obs_dtype).max)
-        self._consts = (np.ascontiguousarray(-bound), np.ascontiguousarray(bound), self.control_period,
-                        self.state_bound, self.bound_step_cost, self._log_c0, big,
-                        -1 if mc is None else int(mc), int(self.penalty_cycles), self.has_reference,
-                        REWARD_CODES[self.reward_kind], self.termination_penalty, self.disturbance == "random")
+        #: the step's constants by name (the compiled step gets them as the plain tuple ``_consts``)
+        self._step_consts = StepConsts(
+            u_lo=np.ascontiguousarray(-bound), u_hi=np.ascontiguousarray(bound), period=self.control_period,
+            state_bound=self.state_bound, bound_step_cost=self.bound_step_cost, log_c0=self._log_c0,
+            big_obs=float(np.finfo(self.obs_dtype).max), max_cycles=-1 if mc is None else int(mc),
+            penalty_cycles=int(self.penalty_cycles), has_ref=self.has_reference,
+            reward_code=REWARD_CODES[self.reward_kind], termination_penalty=self.termination_penalty,
+            random_v=self.disturbance == "random")
+        self._consts = tuple(self._step_consts)
         self._rngs: list = [None] * self.num_envs
         #: True once some copy has been reset
         self.started = False
@@ -284,7 +289,8 @@ class EnvCore:
         outb[0] = True  # finite
         self._reason, self._cycles = np.zeros(B, np.int8), np.zeros(B, np.int64)
         self._sig = np.zeros((3, B, m_v, N_RANDOM_TERMS))
-        self._state = (self._t, self._x, self._z, self._g, self._gs, self._v, self._xr)
+        self._state = tuple(StateArrays(t=self._t, x=self._x, z=self._z, gamma=self._g, gamma_s=self._gs, v=self._v,
+                                        x_r=self._xr))
         self._outs = (outf, outb, self._reason, self._cycles)
         self._views()
 
@@ -333,7 +339,8 @@ class EnvCore:
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
             raise ValueError(f"max_cycles must be None or a positive integer, got {value!r}")
         self._max_cycles = None if value is None else int(value)
-        self._consts = self._consts[:7] + (-1 if value is None else int(value),) + self._consts[8:]
+        self._step_consts = self._step_consts._replace(max_cycles=-1 if value is None else int(value))
+        self._consts = tuple(self._step_consts)
 
     def agent_inputs(self, actions, out: np.ndarray | None = None) -> np.ndarray:
         """Inputs ``u (B, m)`` (for :meth:`advance`) from the agents' actions concatenated in agent
@@ -533,7 +540,7 @@ class EnvCore:
         rows = self._rows(indices)
         if not isinstance(state, SimState):
             raise TypeError(f"state must be a SimState, got {type(state).__name__}")
-        for dst, name in zip(self._state, ("t", "x", "z", "gamma", "gamma_s", "v", "x_r")):
+        for dst, name in zip(self._state, StateArrays._fields):
             src = np.asarray(getattr(state, name), dtype=np.float64)
             if src.shape != (rows.size,) + dst.shape[1:]:
                 raise ValueError(f"state.{name} must have shape {(rows.size,) + dst.shape[1:]}, got {src.shape}")

@@ -20,7 +20,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import NamedTuple
+
 from ..numba_cache import ensure_fresh
+from ..packing import compiled_unpack, f64, i64, pack
+from ..sim.kernel_args import StateArrays
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -35,57 +39,53 @@ except ImportError:  # pragma: no cover
 
     _njit_inline = _njit
 
-__all__ = ["pack_static", "unpack_static", "features_row", "write_features", "flops_per_row"]
+__all__ = ["FeatureArgs", "pack_static", "unpack_static", "features_row", "write_features", "flops_per_row"]
+
+
+class FeatureArgs(NamedTuple):
+    """The constants of the feature kernel (declaration: :mod:`dobs_envs.packing`), passed packed
+    as ``(SF, SI)`` (:func:`pack_static`) and read by name in compiled code (:func:`unpack_static`)."""
+
+    F: i64()  # feature-vector length
+    C: f64("N p n")  # padded output matrices, eq. (localmeasure)
+    G: f64("N n p")  # Gbar, eq. (hatxieq)
+    ref: f64("3 m")  # amplitude, frequency, phase of r(t), eq. (refxdy)
+    Q: f64("n n")  # cost weights
+    R: f64("m m")
+    off: i64("o")  # offsets of FeatureLayout.offsets: (y, xhat, x, x_r, gamma, gamma_s, v, r, time, e), then p_i
+    idx: i64("k")  # the flattened (K, D) padded gather
 
 
 def pack_static(C, G, ref, Q, R, off, idx, F):
-    """The kernel's constant arrays packed into one float and one int buffer ``(SF, SI)``
-    (fewer arguments = cheaper compiled-call dispatch on the per-step path).
+    """The kernel's constant arrays (:class:`FeatureArgs`) packed into one float and one int buffer
+    ``(SF, SI)`` (fewer arguments = cheaper compiled-call dispatch on the per-step path).
 
     ``C (N, p, n)``/``G (N, n, p)`` padded design arrays; ``ref (3, m)`` amplitude,
     frequency, phase of ``r(t)``; ``Q (n, n)``, ``R (m, m)``; ``off`` the offsets of
     :meth:`FeatureLayout.offsets`; ``idx`` the flattened ``(K, D)`` padded gather; ``F``
     the feature-vector length.
     """
-    C, G, ref, Q, R = (np.ascontiguousarray(a, dtype=np.float64) for a in (C, G, ref, Q, R))
-    N, p, n = C.shape
-    m = R.shape[0]
-    idx = np.asarray(idx, dtype=np.int64).ravel()
-    SF = np.concatenate([C.ravel(), G.ravel(), ref.ravel(), Q.ravel(), R.ravel()])
-    head = np.array([F, N, p, n, m, ref.shape[1], len(off), idx.size], dtype=np.int64)
-    SI = np.concatenate([head, np.asarray(off, dtype=np.int64), idx])
-    return SF, SI
+    return pack(FeatureArgs(F=int(F), C=C, G=G, ref=ref, Q=Q, R=R, off=np.asarray(off, dtype=np.int64),
+                            idx=np.asarray(idx, dtype=np.int64).ravel()))
 
 
-@_njit
-def unpack_static(SF, SI):
-    """Views of the arrays packed by :func:`pack_static`:
-    ``(F, C (N, p, n), G (N, n, p), ref (3, m), Q (n, n), R (m, m), off, idx)``."""
-    F, N, p, n, m, mr, no, ni = SI[0], SI[1], SI[2], SI[3], SI[4], SI[5], SI[6], SI[7]
-    a = 0
-    C = SF[a:a + N * p * n].reshape((N, p, n))
-    a += N * p * n
-    G = SF[a:a + N * n * p].reshape((N, n, p))
-    a += N * n * p
-    ref = SF[a:a + 3 * mr].reshape((3, mr))
-    a += 3 * mr
-    Q = SF[a:a + n * n].reshape((n, n))
-    a += n * n
-    R = SF[a:a + m * m].reshape((m, m))
-    off = SI[8:8 + no]
-    idx = SI[8 + no:8 + no + ni]
-    return F, C, G, ref, Q, R, off, idx
+#: ``unpack_static(SF, SI)``: the :class:`FeatureArgs` packed by :func:`pack_static` (views), compiled
+#: from source generated from the declaration (:func:`dobs_envs.packing.compiled_unpack`).
+unpack_static = compiled_unpack(FeatureArgs, _njit, "unpack_static")
 
 
 @_njit_inline
-def features_row(b, x, z, x_r, gamma, gamma_s, v, t, W, F, C, G, ref, Q, R, off, idx, has_ref, obs2, y):
-    """Copy ``b``: fill ``W[b]`` and ``obs2[b] (K * D)``; return ``(cost, ||e||, ||x||, finite)``
-    (``y (p,)`` is scratch).
+def features_row(b, st, W, fa, has_ref, obs2, y):
+    """Copy ``b`` of the state ``st`` (:class:`~dobs_envs.sim.kernel_args.StateArrays`): fill ``W[b]``
+    and ``obs2[b] (K * D)`` with the constants ``fa`` (:class:`FeatureArgs`); return
+    ``(cost, ||e||, ||x||, finite)`` (``y (p,)`` is scratch).
 
     Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``,
     ``xhat_i = z_i + G_i y_i``. ``finite`` is accumulated as ``sum(value * 0)``, which is 0
     exactly when every state entry is finite (``inf * 0`` and ``NaN * 0`` are NaN).
     """
+    x, z, x_r, gamma, gamma_s, v, t = st.x, st.z, st.x_r, st.gamma, st.gamma_s, st.v, st.t
+    F, C, G, ref, Q, R, off, idx = fa.F, fa.C, fa.G, fa.ref, fa.Q, fa.R, fa.off, fa.idx
     N, n = z.shape[1], z.shape[2]
     p = C.shape[1]
     m = R.shape[0]
@@ -173,13 +173,13 @@ def write_features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, obs, row
     cost, err, xnorm : (B,) float64, finite : (B,) bool, written at ``rows``:
         ``e'Qe + u'Ru``, ``||e||``, ``||x||`` and the finiteness flag.
     """
-    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    fa = unpack_static(SF, SI)
+    st = StateArrays(t, x, z, gamma, gamma_s, v, x_r)
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
-    y = np.empty(C.shape[1])
+    y = np.empty(fa.C.shape[1])
     for r in range(rows.shape[0]):
         b = rows[r]
-        c, e, xn, fin = features_row(b, x, z, x_r, gamma, gamma_s, v, t, W, F, C, G, ref, Q, R, off, idx, has_ref,
-                                     obs2, y)
+        c, e, xn, fin = features_row(b, st, W, fa, has_ref, obs2, y)
         cost[b] = c
         err[b] = e
         xnorm[b] = xn

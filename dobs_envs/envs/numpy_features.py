@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .features import unpack_static
+from ..packing import unpack
+from .features import FeatureArgs
 
 __all__ = ["write_features_reference"]
 
@@ -50,7 +51,8 @@ def write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref
 
 
 def _features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, obs, rows, cost, err, xnorm, finite):
-    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    fa = unpack(FeatureArgs, SF, SI)
+    F, C, G, ref, Q, R, off, idx = fa.F, fa.C, fa.G, fa.ref, fa.Q, fa.R, fa.off, fa.idx
     N, n = z.shape[1], z.shape[2]
     p_i = off[10:10 + N]
     o_y, o_xhat, o_x, o_xr, o_g, o_gs, o_v, o_r, o_t, o_e = off[:10]

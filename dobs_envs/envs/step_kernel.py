@@ -23,10 +23,13 @@ Nothing is modified when some input is not finite: the kernel returns the first 
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..numba_cache import ensure_fresh
 from ..sim.kernel import advance_rows, unpack_kernel_args
+from ..sim.kernel_args import StateArrays
 from .features import features_row, unpack_static
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
@@ -39,11 +42,32 @@ except ImportError:  # pragma: no cover
     def _njit(f):
         return f
 
-__all__ = ["advance_batch", "advance_range", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
+__all__ = ["StepConsts", "advance_batch", "advance_range", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
            "REASON_NON_FINITE", "REASON_HORIZON"]
 
 #: reason codes (int8) of a step
 REASON_NONE, REASON_STATE_BOUND, REASON_NON_FINITE, REASON_HORIZON = 0, 1, 2, 3
+
+
+class StepConsts(NamedTuple):
+    """The scalar constants of one step of a core (:class:`~dobs_envs.envs.core.EnvCore` builds them by
+    name). The compiled step receives them as a plain tuple in this field order (``tuple(consts)``:
+    a named tuple costs ~1.5 us more per compiled call to dispatch) and reads them by name
+    (``c = StepConsts(*consts)``, free in compiled code)."""
+
+    u_lo: np.ndarray  # (m,) lower input bounds (clip)
+    u_hi: np.ndarray  # (m,) upper input bounds
+    period: float  # control period T
+    state_bound: float  # ||x|| beyond which a copy terminates (reason 1)
+    bound_step_cost: float  # cost of one control step on the bound (terminal penalty unit)
+    log_c0: float  # cost scale of the log reward
+    big_obs: float  # largest finite value of the observation dtype (cleaning)
+    max_cycles: int  # truncation horizon in control steps (-1: none)
+    penalty_cycles: int  # horizon charged by the termination penalty
+    has_ref: bool  # tracking task (reference command)
+    reward_code: int  # 0 quadratic, 1 log, 2 sqrt
+    termination_penalty: bool  # charge bound_step_cost for every remaining step on termination
+    random_v: bool  # the "random" disturbance (v set from the per-copy signal at each period's start)
 
 
 @_njit
@@ -80,25 +104,28 @@ def _clean(a, b, big, ncols):
 def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
     """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
     releases the GIL: threads may advance disjoint ranges of one batch concurrently."""
-    ka = unpack_kernel_args(ka[0], ka[1])
-    t, x, z, gamma, gamma_s, v, x_r = state
+    KF, KI = ka
+    ka = unpack_kernel_args(KF, KI)
+    fa = unpack_static(SF, SI)
+    c = StepConsts(*consts)
+    st = StateArrays(*state)
+    t, x, z, gamma, gamma_s, v, x_r = st.t, st.x, st.z, st.gamma, st.gamma_s, st.v, st.x_r
     outf, outb, reason, cycles = outs
     reward, cost, err, xnorm = outf[0], outf[1], outf[2], outf[3]
     finite, term, trunc = outb[0], outb[1], outb[2]
     sig_a, sig_w, sig_ph = sig[0], sig[1], sig[2]
-    u_lo, u_hi, period, state_bound, bound_cost, log_c0, big_obs, max_cycles, penalty_cycles, \
-        has_ref, reward_code, penalty, random_v = consts
-    F, C, G, ref, Q, R, off, idx = unpack_static(SF, SI)
+    u_lo, u_hi, period = c.u_lo, c.u_hi, c.period
+    F = fa.F
     N = z.shape[1]
     m = u.shape[1]
     ou = F + N
-    o_r = off[7]
+    o_r = fa.off[7]
     # 1-2: applied inputs, disturbance at the period's start
     for b in range(lo, hi):
         for j in range(m):
             uj = u[b, j]
             W[b, ou + j] = u_lo[j] if uj < u_lo[j] else (u_hi[j] if uj > u_hi[j] else uj)
-        if random_v:
+        if c.random_v:
             tb = t[b]
             for j in range(v.shape[1]):
                 s = 0.0
@@ -109,25 +136,24 @@ def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
     advance_rows(x, z, gamma, gamma_s, v, x_r, W[:, ou:ou + m], W[:, o_r:o_r + m], ka, lo, hi)
     # 4-5: features, reward, termination
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
-    y = np.empty(C.shape[1])
+    y = np.empty(fa.C.shape[1])
     f64max = np.finfo(np.float64).max
     for b in range(lo, hi):
         t[b] = t[b] + period
         cycles[b] += 1
-        c, e, xn, fin = features_row(b, x, z, x_r, gamma, gamma_s, v, t, W, F, C, G, ref, Q, R, off, idx, has_ref,
-                                     obs2, y)
-        cost[b] = c
+        cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y)
+        cost[b] = cb
         err[b] = e
         xnorm[b] = xn
         finite[b] = fin
-        if reward_code == 1:  # log
-            shaped = np.log1p(c / log_c0) if c < np.inf else np.inf
-        elif reward_code == 2:  # sqrt
-            shaped = np.sqrt(c)
+        if c.reward_code == 1:  # log
+            shaped = np.log1p(cb / c.log_c0) if cb < np.inf else np.inf
+        elif c.reward_code == 2:  # sqrt
+            shaped = np.sqrt(cb)
         else:
-            shaped = c
+            shaped = cb
         rw = -shaped * period
-        if xn > state_bound and _row_finite(x, b):  # a finite plant state beyond the bound: reason 1
+        if xn > c.state_bound and _row_finite(x, b):  # a finite plant state beyond the bound: reason 1
             tm, rs = True, REASON_STATE_BOUND
         elif not fin:
             tm, rs = True, REASON_NON_FINITE
@@ -135,13 +161,13 @@ def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
             tm, rs = False, REASON_NONE
         tr = False
         if tm:
-            _clean(obs2, b, big_obs, obs2.shape[1])
+            _clean(obs2, b, c.big_obs, obs2.shape[1])
             _clean(W, b, f64max, F)  # the feature vector; est/u stay raw (diagnostics)
             if not np.isfinite(rw):
-                rw = -bound_cost
-            if penalty:
-                rw -= bound_cost * max(0, penalty_cycles - cycles[b])
-        elif max_cycles >= 0 and cycles[b] >= max_cycles:
+                rw = -c.bound_step_cost
+            if c.termination_penalty:
+                rw -= c.bound_step_cost * max(0, c.penalty_cycles - cycles[b])
+        elif c.max_cycles >= 0 and cycles[b] >= c.max_cycles:
             tr, rs = True, REASON_HORIZON
         reward[b] = rw
         term[b] = tm
@@ -155,16 +181,15 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
 
     Parameters
     ----------
-    state : (t (B,), x (B, n), z (B, N, n), gamma (B, N), gamma_s (B, N), v (B, m_v), x_r (B, n)),
-        updated in place.
+    state : (t (B,), x (B, n), z (B, N, n), gamma (B, N), gamma_s (B, N), v (B, m_v), x_r (B, n)), the
+        fields of :class:`~dobs_envs.sim.kernel_args.StateArrays` as a plain tuple, updated in place.
     W : (B, F + N + m) work rows ``[f | est | u]``; obs : (B, K, D) padded observations.
     outs : (outf (4, B) float64 rows reward, cost, ||e||, ||x||; outb (3, B) bool rows finite,
         terminated, truncated; reason (B,) int8; cycles (B,) int64), written.
     u : (B, m) float64 requested inputs (read).
     sig : (3, B, m_v, L): amplitudes, frequencies, phases of the "random" disturbance.
     ka : ``SimParams.kernel_packed`` (KF, KI); SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
-    consts : (u_lo (m,), u_hi (m,), period, state_bound, bound_step_cost, log_c0, big_obs,
-        max_cycles (-1: none), penalty_cycles, has_ref, reward_code (0 quadratic, 1 log, 2 sqrt), termination_penalty, random_v).
+    consts : a plain tuple of the fields of :class:`StepConsts`, in its field order.
 
     Returns
     -------

@@ -38,7 +38,8 @@ from gymnasium.vector.vector_env import AutoresetMode
 
 from ..linalg.validation import as_numeric, check_seed
 from ..registry import ENVIRONMENTS, EnvEntry
-from .centralized import reject_horizon_options, central_spaces
+from .adapter import CoreAdapter, central_spaces
+from .centralized import reject_horizon_options
 from .options import RENDER_MODES
 from .rendering import LivePlot
 
@@ -84,7 +85,8 @@ class DObsVectorEnv(VectorEnv):
         self.single_observation_space, self.single_action_space, self.agent_observation_slices = central_spaces(c)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._cat = c.layout.concat_index
+        #: the core's outputs as the centralised copies', their actions as inputs
+        self._adapter = CoreAdapter(c)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
         self._live = None  # render_mode="human": copy 0's live window
 
@@ -121,8 +123,7 @@ class DObsVectorEnv(VectorEnv):
         a = np.asarray(as_numeric(actions, "actions"), dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape} (copies, inputs), got {a.shape}")
-        if self.core.normalized_actions:
-            a = a * self.core.action_scale
+        a = self._adapter.central_inputs(a)
         again = self._autoreset
         if again.any():
             a = a.copy()
@@ -139,18 +140,13 @@ class DObsVectorEnv(VectorEnv):
         return self._obs(), rew, term, trunc, self._infos(reason)
 
     def _obs(self) -> np.ndarray:
-        flat = self.core.observations.reshape(self.num_envs, -1)
-        return flat.copy() if self.core.layout.uniform else flat[:, self._cat]  # a new array
+        return self._adapter.central_observations()  # a new array
 
     def _infos(self, reason) -> dict:
-        c, B = self.core, self.num_envs
-        info = {"tracking_error": c.tracking_errors.copy(), "estimation_errors": c.estimation_errors.copy(),
-                "gamma": c.gamma.copy(), "gamma_s": c.gamma_s.copy()}
-        if c.task_error_key is not None:
-            info[c.task_error_key] = np.array(c.task_errors(), dtype=np.float64)
+        info = self._adapter.info_arrays()
         info["termination_reason"] = reason
         for k in list(info):
-            info[f"_{k}"] = np.ones(B, dtype=bool)
+            info[f"_{k}"] = np.ones(self.num_envs, dtype=bool)
         return info
 
     def render(self):

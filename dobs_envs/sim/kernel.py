@@ -68,15 +68,19 @@ Per copy: :func:`period_copy` runs the test; a tile flags every lane whose test 
 period's start with :func:`period_copy`, so a copy's result still depends on nothing but its own
 state (the unflagged lanes pass the copy's test with a margin: the same plain steps).
 
-The constants arrive as one :class:`~dobs_envs.sim.state.KernelArgs` tuple
-(``SimParams.kernel_tuple``, built once per parameter set); from Python they are passed packed
-into two buffers (``SimParams.kernel_packed``, unpacked by :func:`unpack_kernel_args`).
+The constants arrive as one :class:`~dobs_envs.sim.kernel_args.KernelArgs` named tuple ``ka``
+(declared once in :mod:`.kernel_args`; built once per parameter set), read by name (``ka.dt``,
+``ka.rows.E_bar``); from Python they are passed packed into two buffers
+(``SimParams.kernel_packed``), which :func:`unpack_kernel_args` (generated from the declaration)
+unpacks in compiled code.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..numba_cache import ensure_fresh
+from ..packing import compiled_unpack
+from .kernel_args import KernelArgs
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -125,19 +129,18 @@ __all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "MAX_SPLIT", "period_co
 @_njit
 def _scratch_copy(ka):
     """Work arrays of :func:`period_copy` (allocated once per batch call)."""
-    C, E_bar, Q_proj, B_v = ka[3], ka[4], ka[8], ka[2]
-    N, n, p, rq, mv = E_bar.shape[0], E_bar.shape[1], C.shape[1], Q_proj.shape[2], B_v.shape[1]
+    N, n, p, rq, mv = ka.E_bar.shape[0], ka.E_bar.shape[1], ka.C.shape[1], ka.Q_proj.shape[2], ka.B_v.shape[1]
     return (np.empty(N * p), np.empty(N * n), np.empty(N * n), np.empty(N * rq), np.empty(N * n), np.empty(N * n),
             np.empty(n), np.empty(n), np.empty(N * n), np.empty(n), np.empty(n), np.empty(mv), np.empty(N),
             np.empty(N), np.empty(N))
 
 
 @_njit_inline
-def _terms(out, rows, vec):
+def _terms(out, sp, vec):
     """``out[row[j]] += val[j] * vec[gcol[j]]`` over every stored entry ``j`` of a row-compressed
-    matrix: each output row sums its terms in column order (one loop over all entries, no
-    data-dependent inner loops)."""
-    ptr, col, val, row, gcol = rows
+    matrix ``sp`` (:class:`~dobs_envs.sim.kernel_args.Sparse`): each output row sums its terms in
+    column order (one loop over all entries, no data-dependent inner loops)."""
+    val, row, gcol = sp.val, sp.row, sp.gcol
     for j in range(val.shape[0]):
         q = row[j]
         out[q] = out[q] + val[j] * vec[gcol[j]]
@@ -148,27 +151,28 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
     """One control period of copy ``b`` in place (batch-first arrays, see module doc).
 
     ``x (B, n)``, ``z (B, N, n)``, ``gamma``/``gamma_s (B, N)``, ``v (B, m_v)``, ``x_r (B, n)``;
-    held ``u``/``r (B, m)``; ``ka`` the :class:`~dobs_envs.sim.state.KernelArgs` fields in
-    order; ``sc`` the work arrays of :func:`_scratch_copy`. Every matrix-vector product runs
-    over the stored entries of a row-compressed matrix (``ka.rows``), each output summing its
-    terms in column order, as :func:`period_tile` does per copy.
+    held ``u``/``r (B, m)``; ``ka`` the :class:`~dobs_envs.sim.kernel_args.KernelArgs`; ``sc``
+    the work arrays of :func:`_scratch_copy`. Every matrix-vector product runs over the stored
+    entries of a row-compressed matrix (``ka.rows``), each output summing its terms in column
+    order, as :func:`period_tile` does per copy.
     """
-    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka  # = KernelArgs._fields
-    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows  # = ROW_MATRICES
+    rows = ka.rows
+    proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
+    phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
+    dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
     y, xhat, d, cq, w, bu, Bu, Br, zn, xdot, xrdot, vnew, nwv, nw2v, coef = sc
     N, n = z.shape[1], z.shape[2]
-    p, mv = C.shape[1], B_v.shape[1]
-    rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    p, mv = ka.C.shape[1], ka.B_v.shape[1]
+    rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
     xb, xrb, vb, ub, rb = x[b], x_r[b], v[b], u[b], r[b]
     zb = z[b].reshape(N * n)  # node i's state at i * n
     # held inputs (ZOH over the control period): Bbar_i u, B u, B r
     bu[:] = 0.0
-    _terms(bu, BBr, ub)
+    _terms(bu, rows.B_bar, ub)
     Bu[:] = 0.0
-    _terms(Bu, BUr, ub)
+    _terms(Bu, rows.B, ub)
     Br[:] = 0.0
-    _terms(Br, BUr, rb)
+    _terms(Br, rows.B, rb)
     hmin = dt / MAX_SPLIT
     for _ in range(substeps):
         # one Euler step of length dt; split into shorter steps (v held) when the stability
@@ -181,10 +185,10 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
             # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
             for q in range(N * p):
                 y[q] = 0.0
-            _terms(y, CCr, xb)
+            _terms(y, rows.C, xb)
             for q in range(N * n):
                 xhat[q] = zb[q]
-            _terms(xhat, GGr, y)
+            _terms(xhat, rows.G_bar, y)
             # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
             for i in range(N):
                 for k in range(n):
@@ -199,10 +203,10 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
             # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
             for q in range(N * rq):
                 cq[q] = 0.0
-            _terms(cq, QTr, d)
+            _terms(cq, rows.Q_projT, d)
             for q in range(N * n):
                 w[q] = 0.0
-            _terms(w, QQr, cq)
+            _terms(w, rows.Q_proj, cq)
             crit = 0.0
             for i in range(N):
                 nw2 = 0.0
@@ -243,8 +247,8 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
                 ci = coef[i]
                 for k in range(n):
                     zn[i * n + k] = bu[i * n + k] - ci * w[i * n + k]
-            _terms(zn, EEr, zb)
-            _terms(zn, FFr, y)
+            _terms(zn, rows.E_bar, zb)
+            _terms(zn, rows.F_bar, y)
             for q in range(N * n):
                 zb[q] = zb[q] + h * zn[q]
             # eqs. (gammaiis)/(gagasbeta)
@@ -256,12 +260,12 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
             # eq. (LTIsys) plant and eq. (refxdy) reference model
             for k in range(n):
                 xdot[k] = Bu[k]
-            _terms(xdot, AAr, xb)
-            _terms(xdot, BVr, vb)
+            _terms(xdot, rows.A, xb)
+            _terms(xdot, rows.B_v, vb)
             if has_reference:
                 for k in range(n):
                     xrdot[k] = Br[k]
-                _terms(xrdot, ARr, xrb)
+                _terms(xrdot, rows.A_r, xrb)
                 for k in range(n):
                     xrb[k] = xrb[k] + h * xrdot[k]
             for k in range(n):
@@ -272,7 +276,7 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
         # exosystem v <- expm(S dt) v
         for j in range(mv):
             vnew[j] = 0.0
-        _terms(vnew, PVr, vb)
+        _terms(vnew, rows.Phi_v, vb)
         for j in range(mv):
             vb[j] = vnew[j]
 
@@ -299,8 +303,8 @@ def _stable_step(dg, g, ph, nw2):
 @_njit
 def _scratch_tile(ka, W):
     """Tile state (X, Z, G, GS, V, XR, U, R) and work arrays of :func:`period_tile` for ``W`` copies."""
-    B, C, E_bar, Q_proj, B_v = ka[1], ka[3], ka[4], ka[8], ka[2]
-    N, n, p, rq, mv, m = E_bar.shape[0], E_bar.shape[1], C.shape[1], Q_proj.shape[2], B_v.shape[1], B.shape[1]
+    N, n, p, rq = ka.E_bar.shape[0], ka.E_bar.shape[1], ka.C.shape[1], ka.Q_proj.shape[2]
+    mv, m = ka.B_v.shape[1], ka.B.shape[1]
     state = (np.empty((n, W)), np.empty((N, n, W)), np.empty((N, W)), np.empty((N, W)), np.empty((mv, W)),
              np.empty((n, W)), np.empty((m, W)), np.empty((m, W)))
     work = (np.empty((N, p, W)), np.empty((N, n, W)), np.empty((N, n, W)), np.empty((rq, W)), np.empty((n, W)),
@@ -340,27 +344,28 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
     over the copies adding up to four terms. Inlined into :func:`period_tile` (``W`` constant)
     and :func:`period_tile_any` (``W`` at run time).
     """
-    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
-    BBr, BUr, CCr, GGr, QTr, QQr, EEr, FFr, AAr, BVr, ARr, PVr = rows
+    rows = ka.rows
+    proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
+    phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
+    dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
     Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
     N, n = Z.shape[0], Z.shape[1]
-    p, mv = C.shape[1], B_v.shape[1]
-    rq, maxdeg = Q_proj.shape[2], nbr_idx.shape[1]
+    p, mv = ka.C.shape[1], ka.B_v.shape[1]
+    rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
     for c in range(W):
         FL[c] = 0.0
     for i in range(N):
         for k in range(n):
-            _tile_dot(BU[i, k], None, BBr, i * n + k, U, W)
+            _tile_dot(BU[i, k], None, rows.B_bar, i * n + k, U, W)
     for k in range(n):
-        _tile_dot(Bu[k], None, BUr, k, U, W)
-        _tile_dot(Br[k], None, BUr, k, R, W)
+        _tile_dot(Bu[k], None, rows.B, k, U, W)
+        _tile_dot(Br[k], None, rows.B, k, R, W)
     for _ in range(substeps):
         for i in range(N):
             for q in range(p):
-                _tile_dot(Y[i, q], None, CCr, i * p + q, X, W)
+                _tile_dot(Y[i, q], None, rows.C, i * p + q, X, W)
             for k in range(n):
-                _tile_dot(XH[i, k], Z[i, k], GGr, i * n + k, Y[i], W)
+                _tile_dot(XH[i, k], Z[i, k], rows.G_bar, i * n + k, Y[i], W)
         for i in range(N):
             dg = deg[i]
             for k in range(n):
@@ -375,12 +380,12 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
                             D[i, k, c] = D[i, k, c] - a * XH[j, k, c]
         for i in range(N):
             for c_ in range(rq):
-                _tile_dot(CQ[c_], None, QTr, i * rq + c_, D[i], W)
+                _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
             for c in range(W):
                 nw2[c] = 0.0
             rng_ = proj_range[i]
             for k in range(n):
-                _tile_dot(Wv[k], None, QQr, i * n + k, CQ, W)
+                _tile_dot(Wv[k], None, rows.Q_proj, i * n + k, CQ, W)
                 if rng_:
                     for c in range(W):
                         nw2[c] = nw2[c] + Wv[k, c] * Wv[k, c]
@@ -401,8 +406,8 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
             for k in range(n):
                 for c in range(W):
                     ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
-                _tile_dot(ZN[k], ZN[k], EEr, i * n + k, Z[i], W)
-                _tile_dot(ZN[k], ZN[k], FFr, i * n + k, Y[i], W)
+                _tile_dot(ZN[k], ZN[k], rows.E_bar, i * n + k, Z[i], W)
+                _tile_dot(ZN[k], ZN[k], rows.F_bar, i * n + k, Y[i], W)
                 for c in range(W):
                     ZN[k, c] = Z[i, k, c] + dt * ZN[k, c]
             for k in range(n):
@@ -415,12 +420,12 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
                 G[i, c] = g + dt * (-sg * g + ph * nw2[c])
                 GS[i, c] = gs + dt * (-sgs * gs + phs * nw[c])
         for k in range(n):
-            _tile_dot(XD[k], Bu[k], AAr, k, X, W)
+            _tile_dot(XD[k], Bu[k], rows.A, k, X, W)
             if mv:
-                _tile_dot(XD[k], XD[k], BVr, k, V, W)
+                _tile_dot(XD[k], XD[k], rows.B_v, k, V, W)
         if has_reference:
             for k in range(n):
-                _tile_dot(XRD[k], Br[k], ARr, k, XR, W)
+                _tile_dot(XRD[k], Br[k], rows.A_r, k, XR, W)
             for k in range(n):
                 for c in range(W):
                     XR[k, c] = XR[k, c] + dt * XRD[k, c]
@@ -428,18 +433,18 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
             for c in range(W):
                 X[k, c] = X[k, c] + dt * XD[k, c]
         for j in range(mv):
-            _tile_dot(VN[j], None, PVr, j, V, W)
+            _tile_dot(VN[j], None, rows.Phi_v, j, V, W)
         for j in range(mv):
             for c in range(W):
                 V[j, c] = VN[j, c]
 
 
 @_njit_inline
-def _tile_dot(out, init, rows, q, X, W):
+def _tile_dot(out, init, sp, q, X, W):
     """``out[c] = init[c] + sum_l M[q, l] X[l, c]`` (``init`` None: 0) for the ``W`` copies ``c``,
-    ``M = rows`` row-compressed: the stored entries of row ``q`` in column order, up to four
-    per pass over the copies."""
-    ptr, col, val, _, _ = rows
+    ``M = sp`` row-compressed (:class:`~dobs_envs.sim.kernel_args.Sparse`): the stored entries of
+    row ``q`` in column order, up to four per pass over the copies."""
+    ptr, col, val = sp.ptr, sp.col, sp.val
     if init is None:
         for c in range(W):
             out[c] = 0.0
@@ -532,58 +537,10 @@ def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
             period_copy(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc)
 
 
-@_njit
-def _rows(KF, KI, f):
-    t = 10 + 5 * f
-    po, pn, co, nz, vo = KI[t], KI[t + 1], KI[t + 2], KI[t + 3], KI[t + 4]
-    return KI[po:po + pn], KI[co:co + nz], KF[vo:vo + nz], KI[co + nz:co + 2 * nz], KI[co + 2 * nz:co + 3 * nz]
-
-
-@_njit
-def unpack_kernel_args(KF, KI):
-    """The ``KernelArgs`` tuple (views of ``KF``/``KI``; ``proj_range`` as 0/1 integers)."""
-    n, m, mv, N, p, r, D, substeps, has_ref, nf = KI[0], KI[1], KI[2], KI[3], KI[4], KI[5], KI[6], KI[7], KI[8], KI[9]
-    a = 0
-    A = KF[a:a + n * n].reshape((n, n))
-    a += n * n
-    B = KF[a:a + n * m].reshape((n, m))
-    a += n * m
-    B_v = KF[a:a + n * mv].reshape((n, mv))
-    a += n * mv
-    C = KF[a:a + N * p * n].reshape((N, p, n))
-    a += N * p * n
-    E_bar = KF[a:a + N * n * n].reshape((N, n, n))
-    a += N * n * n
-    F_bar = KF[a:a + N * n * p].reshape((N, n, p))
-    a += N * n * p
-    G_bar = KF[a:a + N * n * p].reshape((N, n, p))
-    a += N * n * p
-    B_bar = KF[a:a + N * n * m].reshape((N, n, m))
-    a += N * n * m
-    Q_proj = KF[a:a + N * n * r].reshape((N, n, r))
-    a += N * n * r
-    nbr_w = KF[a:a + N * D].reshape((N, D))
-    a += N * D
-    deg = KF[a:a + N]
-    a += N
-    A_r = KF[a:a + n * n].reshape((n, n))
-    a += n * n
-    phi = KF[a:a + N]
-    phi_s = KF[a + N:a + 2 * N]
-    sigma = KF[a + 2 * N:a + 3 * N]
-    sigma_s = KF[a + 3 * N:a + 4 * N]
-    a += 4 * N
-    Phi_v = KF[a:a + mv * mv].reshape((mv, mv))
-    a += mv * mv
-    dt = KF[a]
-    o = 10 + 5 * nf
-    proj_range = KI[o:o + N]
-    nbr_idx = KI[o + N:o + N + N * D].reshape((N, D))
-    rows = (_rows(KF, KI, 0), _rows(KF, KI, 1), _rows(KF, KI, 2), _rows(KF, KI, 3), _rows(KF, KI, 4),
-            _rows(KF, KI, 5), _rows(KF, KI, 6), _rows(KF, KI, 7), _rows(KF, KI, 8), _rows(KF, KI, 9),
-            _rows(KF, KI, 10), _rows(KF, KI, 11))
-    return (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-            phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_ref != 0, rows)
+#: ``unpack_kernel_args(KF, KI)``: the :class:`~dobs_envs.sim.kernel_args.KernelArgs` packed in
+#: ``SimParams.kernel_packed`` (views of the buffers; ``proj_range`` as 0/1 integers), compiled from
+#: source generated from the declaration (:func:`dobs_envs.packing.compiled_unpack`).
+unpack_kernel_args = compiled_unpack(KernelArgs, _njit, "unpack_kernel_args")
 
 
 @_njit
@@ -623,11 +580,12 @@ def flops_per_period(p, *, dense: bool = False) -> int:
     N, n, m, mv = p.n_nodes, p.n_states, p.n_inputs, p.n_unknown
     P, rq = p.C.shape[1], p.Q_proj.shape[2]
     if dense:
-        nnz = [N * n * m, n * m, N * P * n, N * n * P, N * rq * n, N * n * rq, N * n * n, N * n * P, n * n, n * mv,
-               n * n, mv * mv]
+        nnz = dict(B_bar=N * n * m, B=n * m, C=N * P * n, G_bar=N * n * P, Q_projT=N * rq * n, Q_proj=N * n * rq,
+                   E_bar=N * n * n, F_bar=N * n * P, A=n * n, B_v=n * mv, A_r=n * n, Phi_v=mv * mv)
     else:
-        nnz = [int(rows[0][-1]) for rows in p.kernel_args.rows]
-    BB, BU, CC, GG, QT, QQ, EE, FF, AA, BV, AR, PV = nnz
+        nnz = {name: int(sp.ptr[-1]) for name, sp in p.kernel_args.rows._asdict().items()}
+    BB, BU, CC, GG, QT, QQ, EE, FF = (nnz[k] for k in ("B_bar", "B", "C", "G_bar", "Q_projT", "Q_proj", "E_bar", "F_bar"))
+    AA, BV, AR, PV = nnz["A"], nnz["B_v"], nnz["A_r"], nnz["Phi_v"]
     nbr = int(np.count_nonzero(p.nbr_w))
     held = 2 * (BB + 2 * BU)
     sub = (2 * CC + 2 * GG  # y, xhat

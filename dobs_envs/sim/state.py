@@ -16,14 +16,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import NamedTuple
-
 import numpy as np
 from scipy.linalg import expm
 
 from ..linalg.validation import as_array
+from .kernel_args import ROW_MATRICES, KernelArgs, StateArrays, compress_rows, kernel_args_of, pack_kernel_args
 
-__all__ = ["SimState", "SimParams", "KernelArgs", "ROW_MATRICES", "compress_rows", "pack_kernel_args"]
+__all__ = ["SimState", "SimParams", "KernelArgs", "StateArrays", "ROW_MATRICES", "compress_rows", "pack_kernel_args"]
 
 
 def _ro(a, shape=None) -> np.ndarray:
@@ -78,108 +77,6 @@ def _neighbour_lists(adj: np.ndarray):
         idx[i, : len(nb)] = nb
         wts[i, : len(nb)] = adj[i, nb]
     return idx, wts
-
-
-#: The row-compressed matrices of :attr:`KernelArgs.rows`, in order: name, the dense field, and the
-#: vector each row multiplies (per node ``i`` where the field is node-stacked).
-ROW_MATRICES = (
-    ("B_bar", "u"),  # (N, n, m): Bbar_i u (held input of node i)
-    ("B", "u"),  # (n, m): B u and B r
-    ("C", "x"),  # (N, p, n): y_i = C_i x
-    ("G_bar", "y_i"),  # (N, n, p): Gbar_i y_i
-    ("Q_projT", "d_i"),  # (N, r, n): Q_i^T d_i (the transposed thin projector basis)
-    ("Q_proj", "cq_i"),  # (N, n, r): Q_i cq_i
-    ("E_bar", "z_i"),  # (N, n, n)
-    ("F_bar", "y_i"),  # (N, n, p)
-    ("A", "x"),  # (n, n)
-    ("B_v", "v"),  # (n, m_v)
-    ("A_r", "x_r"),  # (n, n)
-    ("Phi_v", "v"),  # (m_v, m_v)
-)
-
-
-def compress_rows(M, per_node_input: bool = False) -> tuple:
-    """``(ptr, col, val, row, gcol)``: the rows of ``M (..., K, L)`` (flattened to ``R`` rows in C
-    order) without their exact zeros. Row ``q`` is ``val[ptr[q]:ptr[q+1]]`` at columns
-    ``col[ptr[q]:ptr[q+1]]`` (increasing); ``row[j]`` is the row of entry ``j`` and ``gcol[j]`` its
-    column in the input vector: ``(q // K) * L + col[j]`` when each node ``i`` of a node-stacked
-    ``M (N, K, L)`` multiplies its own vector stored at ``i * L`` (``per_node_input``), else ``col[j]``. A sum over a row in column order adds exactly the terms of the dense
-    row except ``0 * x`` (``fma(0, x, s) = s`` for finite ``x``): the same result, fewer operations."""
-    M = np.asarray(M, dtype=np.float64)
-    K, L = M.shape[-2] if M.ndim > 1 else 1, M.shape[-1]
-    rows = M.reshape(int(np.prod(M.shape[:-1])), L)
-    nz = rows != 0.0
-    row, col = np.nonzero(nz)
-    ptr = np.concatenate([[0], np.cumsum(nz.sum(axis=1))])
-    gcol = (row // K) * L + col if per_node_input else col
-    return _ro_int(ptr), _ro_int(col), _ro(rows[nz]), _ro_int(row), _ro_int(gcol)
-
-
-def pack_kernel_args(ka) -> tuple:
-    """:class:`KernelArgs` packed into ``(KF float64, KI int64)`` buffers: two arrays to dispatch
-    instead of ~80 on the per-step path; :func:`dobs_envs.sim.kernel.unpack_kernel_args` inverts it
-    inside compiled code."""
-    (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, proj_range, nbr_idx, nbr_w, deg, A_r,
-     phi, phi_s, sigma, sigma_s, Phi_v, dt, substeps, has_reference, rows) = ka
-    n, m, mv = B.shape[0], B.shape[1], B_v.shape[1]
-    N, p, r, D = C.shape[0], C.shape[1], Q_proj.shape[2], nbr_idx.shape[1]
-    dense = [np.ravel(a) for a in (A, B, B_v, C, E_bar, F_bar, G_bar, B_bar, Q_proj, nbr_w, deg, A_r,
-                                    phi, phi_s, sigma, sigma_s, Phi_v)] + [[float(dt)]]
-    head = [n, m, mv, N, p, r, D, int(substeps), int(bool(has_reference)), len(rows)]
-    ints = [np.asarray(proj_range, dtype=np.int64), np.ravel(nbr_idx)]
-    fpos = sum(a.size if hasattr(a, "size") else len(a) for a in dense)
-    ipos = len(head) + 5 * len(rows) + N + N * D
-    table = []
-    for ptr, col, val, row, gcol in rows:  # (ptr offset, rows + 1, col offset, nnz, val offset)
-        table += [ipos, ptr.size, ipos + ptr.size, col.size, fpos]
-        ints += [ptr, col, row, gcol]
-        dense.append(val)
-        ipos += ptr.size + 3 * col.size
-        fpos += val.size
-    KF = np.concatenate([np.asarray(a, dtype=np.float64) for a in dense])
-    KI = np.concatenate([np.asarray(head + table, dtype=np.int64)] + [np.asarray(a, dtype=np.int64) for a in ints])
-    KF.flags.writeable = KI.flags.writeable = False
-    return KF, KI
-
-
-class KernelArgs(NamedTuple):
-    """The constants of one control period as the compiled kernel receives them.
-
-    One named structure built once per :class:`SimParams`
-    (:attr:`SimParams.kernel_args`) and passed as a single argument:
-    ``_control_period(x, z, gamma, gamma_s, v, x_r, u, r, args)``. All arrays
-    are the read-only, C-contiguous arrays of the :class:`SimParams`.
-    The kernel receives it as a plain tuple (:attr:`SimParams.kernel_tuple`,
-    same field order) and unpacks it in one statement: numba dispatches a
-    plain tuple ~1.3 us faster per call than a NamedTuple. The kernel multiplies by the
-    row-compressed matrices of :attr:`rows` (:data:`ROW_MATRICES`; the paper's design
-    matrices are sparse: NE2's ``Ebar`` has 55 nonzeros out of 486); the dense fields give
-    the shapes and serve the numpy reference.
-    """
-
-    A: np.ndarray  # (n, n) plant, eq. (LTIsys)
-    B: np.ndarray  # (n, m)
-    B_v: np.ndarray  # (n, m_v)
-    C: np.ndarray  # (N, p, n) node outputs, zero-padded rows (eq. localmeasure)
-    E_bar: np.ndarray  # (N, n, n) eq. (barEFGB)
-    F_bar: np.ndarray  # (N, n, p)
-    G_bar: np.ndarray  # (N, n, p)
-    B_bar: np.ndarray  # (N, n, m)
-    Q_proj: np.ndarray  # (N, n, r) thin basis of Im T_iu (proj_range) or of Im T_id
-    proj_range: np.ndarray  # (N,) bool: P_u,i = Q Q^T (True) or I - Q Q^T (False)
-    nbr_idx: np.ndarray  # (N, max degree) int64 neighbour indices (padding: weight 0)
-    nbr_w: np.ndarray  # (N, max degree) edge weights a_ij
-    degree: np.ndarray  # (N,) sum_j a_ij
-    A_r: np.ndarray  # (n, n) reference model A + B K (zeros without reference), eq. (refxdy)
-    phi: np.ndarray  # (N,) eq. (gammaiis) step sizes
-    phi_s: np.ndarray  # (N,)
-    sigma: np.ndarray  # (N,) eq. (gagasbeta) leakage
-    sigma_s: np.ndarray  # (N,)
-    Phi_v: np.ndarray  # (m_v, m_v) expm(S_v dt)
-    dt: float  # Euler step (s)
-    substeps: int  # Euler steps per control period
-    has_reference: bool
-    rows: tuple  # (ptr, col, val, row, gcol) of compress_rows for each of ROW_MATRICES, in that order
 
 
 @dataclass(frozen=True)
@@ -275,26 +172,19 @@ class SimParams:
 
     @cached_property
     def kernel_args(self) -> KernelArgs:
-        """The kernel's constants as one :class:`KernelArgs` (built on first use, then cached)."""
-        return KernelArgs(
-            A=self.A, B=self.B, B_v=self.B_v, C=self.C, E_bar=self.E_bar, F_bar=self.F_bar, G_bar=self.G_bar,
-            B_bar=self.B_bar, Q_proj=self.Q_proj, proj_range=self.proj_range, nbr_idx=self.nbr_idx,
-            nbr_w=self.nbr_w, degree=self.degree, A_r=self.A_r, phi=self.phi, phi_s=self.phi_s,
-            sigma=self.sigma, sigma_s=self.sigma_s, Phi_v=self.Phi_v, dt=float(self.dt),
-            substeps=int(self.substeps), has_reference=bool(self.has_reference),
-            rows=tuple(compress_rows(self.Q_proj.transpose(0, 2, 1) if name == "Q_projT" else getattr(self, name),
-                                     per_node_input=vec.endswith("_i"))
-                       for name, vec in ROW_MATRICES),
-        )
+        """The kernel's constants as one :class:`~dobs_envs.sim.kernel_args.KernelArgs`: every field the
+        attribute of that name (:func:`~dobs_envs.sim.kernel_args.kernel_args_of`; built on first use, then cached)."""
+        return kernel_args_of(self)
 
     @cached_property
     def kernel_packed(self) -> tuple:
-        """:attr:`kernel_args` packed into two buffers (:func:`pack_kernel_args`; built once)."""
+        """:attr:`kernel_args` packed into two buffers ``(KF, KI)`` (:func:`pack_kernel_args`; built once): what
+        compiled code is called with from Python."""
         return pack_kernel_args(self.kernel_args)
 
     @cached_property
     def kernel_tuple(self) -> tuple:
-        """:attr:`kernel_args` as a plain tuple (what the compiled kernel is called with)."""
+        """:attr:`kernel_args` as a plain tuple (same field order)."""
         return tuple(self.kernel_args)
 
     @classmethod
