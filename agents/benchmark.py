@@ -80,6 +80,7 @@ AGENTS = {
     "ppo_ma": AgentSpec("ppo", True, None, "PPO (shared, per node)"),
     "sac": AgentSpec("sac", False, None, "SAC (centralised)"),
     "td3": AgentSpec("td3", False, None, "TD3 (centralised)"),
+    "crossq": AgentSpec("crossq", False, None, "CrossQ (centralised)"),
     "sac_ma": AgentSpec("sac", True, None, "SAC (shared, per node)"),
     "ppo_log": AgentSpec("ppo", False, None, "PPO (centralised, log-cost training)", (("reward", "log"),)),
     "ppo_sqrt": AgentSpec("ppo", False, None, "PPO (centralised, sqrt-cost training)", (("reward", "sqrt"),)),
@@ -95,6 +96,8 @@ BUDGETS = {
         "hyperparams": {
             "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "bc": {"episodes": 1, "epochs": 1}},
             "sac": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+            "td3": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+            "crossq": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
         },
     },
     "quick": {
@@ -106,8 +109,9 @@ BUDGETS = {
         "episodes": 20, "seeds": 10, "env_kwargs": {}, "curve_points": 10, "curve_episodes": 5,
         # sac_ma (SAC per node: 5 samples and gradient steps per env step, ~50 env steps/s) and
         # ppo_log (J/J_paper 21x and 67x at 400k on tracking) are available through --agents
-        "agents": {"ppo": 600_000, "ppo_ma": 300_000, "ppo_sqrt": 600_000, "sac": 50_000, "td3": 50_000,
-                   "ppo_res": 300_000, "ppo_res_ma": 150_000, "ppo_bc": 300_000},
+        # the off-policy agents at PPO's env steps (issue 21: equal budgets)
+        "agents": {"ppo": 600_000, "ppo_ma": 300_000, "ppo_sqrt": 600_000, "sac": 600_000, "td3": 600_000,
+                   "crossq": 600_000, "ppo_res": 300_000, "ppo_res_ma": 150_000, "ppo_bc": 300_000},
         "hyperparams": {},
     },
 }
