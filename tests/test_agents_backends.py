@@ -106,6 +106,11 @@ def test_a_run_loads_with_the_library_it_records(fallback_runs):
         assert type(agent.model).__module__.split(".")[0] == {"stable-baselines3": "stable_baselines3",
                                                               "sb3-contrib": "sb3_contrib"}[out[algo][0]]
         np.testing.assert_allclose(agent.predict(obs), out[algo][3], rtol=1e-5, atol=1e-6)
+    # runs written before config.json recorded the library were trained with stable-baselines3 and still load
+    cfg_path = base / "sac" / "config.json"
+    cfg = json.load(open(cfg_path))
+    json.dump({k: v for k, v in cfg.items() if k not in ("library", "library_version")}, open(cfg_path, "w"))
+    np.testing.assert_allclose(load_agent(str(base / "sac")).predict(obs), out["sac"][3], rtol=1e-5, atol=1e-6)
 
 
 def test_backend_of_names_what_is_known():
@@ -120,22 +125,21 @@ def test_backend_of_names_what_is_known():
 
 
 @needs_sbx
-@pytest.mark.parametrize("algo", ["sac", "td3", "crossq"])
-def test_sbx_trains_saves_and_loads(algo, tmp_path):
-    """SBX is the preferred implementation: it trains (VecNormalize on, OU noise for TD3), records itself in
-    config.json and the loaded model acts as the trained one."""
+def test_sbx_trains_saves_and_loads(tmp_path):
+    """SBX is the preferred implementation: TD3 with Ornstein-Uhlenbeck noise trains (VecNormalize on),
+    records itself in config.json and the loaded model acts as the trained one. (SBX SAC: the smoke tests
+    of tests/test_agents_train.py train the preferred backend; SBX CrossQ: test_crossq_through_the_cli.)"""
     import gymnasium as gym
 
-    hp = _small(algo, normalize={"norm_obs": True, "norm_reward": False})
-    if algo == "td3":
-        hp.update(noise_type="ornstein-uhlenbeck", noise_std=0.1)
+    algo = "td3"
+    hp = _small(algo, normalize={"norm_obs": True, "norm_reward": False}, noise_type="ornstein-uhlenbeck",
+                noise_std=0.1)
     out = str(tmp_path / algo)
     res = train("Pendulum-v1", algo, timesteps=120, seed=0, out=out, progress=False, hyperparams=hp)
     assert type(res.model).__module__.startswith("sbx.")
     cfg = json.load(open(os.path.join(out, "config.json")))
     assert cfg["library"] == "sbx-rl" and cfg["library_version"] == backend(algo).library_version()
-    if algo == "td3":
-        assert type(res.model.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
+    assert type(res.model.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
     agent = load_agent(out)
     env = gym.make("Pendulum-v1")
     obs, _ = env.reset(seed=1)
@@ -168,10 +172,14 @@ def test_crossq_through_the_cli(tmp_path, capsys):
                  "--hyperparams", json.dumps(hp)]) == 0
     cfg = json.load(open(os.path.join(out, "config.json")))
     assert (cfg["algo"], cfg["library"]) == ("crossq", backend("crossq").library)
+    assert cfg["library_version"] == backend("crossq").library_version()
     assert cfg["hyperparams"]["policy_delay"] == 3 and "tau" not in cfg["hyperparams"]
     capsys.readouterr()
     assert main(["evaluate", "--model", out, "--episodes", "1"]) == 0
     assert "cost" in capsys.readouterr().out
+    agent = load_agent(out)
+    assert type(agent.model).__name__ == "CrossQ"
+    assert type(agent.model).__module__.split(".")[0] == {"sbx-rl": "sbx", "sb3-contrib": "sb3_contrib"}[cfg["library"]]
 
 
 # ---------------------------------------------------------------------------------------- exploration noise
