@@ -6,7 +6,7 @@ algorithm on the task, ``agents/hyperparams/<algo>.yaml``, with the overrides na
 - ``ppo SB3``: the reference (its recipe: 8 copies on the batched core);
 - ``sac SB3 1 env``: SB3 SAC as shipped (1 copy, one gradient step per env step);
 - ``sac SB3 {N} env G={G}``: SB3 SAC on ``N`` copies of the batched core, ``G`` gradient steps per
-  ``N`` env steps;
+  collect of ``--train-freq`` steps of every copy (default 1: ``G`` per ``N`` env steps);
 - ``sac|td3|crossq SBX ...``: SBX (Stable Baselines Jax) on the CPU, 1 copy and ``N`` copies;
 - ``td3 SB3 1 env``, ``crossq sb3-contrib 1 env``, ``tqc sb3-contrib 1 env`` (TQC with the SAC recipe).
 
@@ -25,7 +25,7 @@ benchmark's learning-curve code), mean over the training runs. The learning curv
 candidates at equal env steps.
 
     python benchmarks/offpolicy_throughput.py [--env tracking] [--steps 2000] [--warmup 500] [--repeats 2]
-        [--n-envs 8] [--gradient-steps 2] [--only sac,crossq] [--xla-threads 1] [--curve 50000 --seeds 3]
+        [--n-envs 8] [--gradient-steps 2] [--train-freq 1] [--only sac,crossq] [--xla-threads 1] [--curve 50000 --seeds 3]
 """
 from __future__ import annotations
 
@@ -55,9 +55,9 @@ class Candidate:
                            extra="jax" if jax else "rl")
 
 
-def candidates(n: int, g: int) -> list[Candidate]:
-    many = {"n_envs": n, "gradient_steps": g}
-    tag = f"{n} env G={g}"
+def candidates(n: int, g: int, train_freq: int = 1) -> list[Candidate]:
+    many = {"n_envs": n, "gradient_steps": g, "train_freq": train_freq}
+    tag = f"{n} env G={g}" + (f" every {train_freq}" if train_freq != 1 else "")
     return [
         Candidate("ppo SB3 (recipe)", "ppo", "stable-baselines3", "PPO"),
         Candidate("sac SB3 1 env (recipe)", "sac", "stable-baselines3", "SAC"),
@@ -188,6 +188,8 @@ def main(argv=None) -> int:
     ap.add_argument("--n-envs", type=int, default=8, help="environment copies of the multi-copy candidates")
     ap.add_argument("--gradient-steps", type=int, default=2, help="gradient steps per collect of the multi-copy "
                                                                    "candidates (one collect = n_envs env steps)")
+    ap.add_argument("--train-freq", type=int, default=1, help="steps of every copy per collect of the multi-copy "
+                                                               "candidates (gradient steps G after each collect)")
     ap.add_argument("--only", default=None, help="comma-separated substrings: candidates whose label holds one "
                                                  "(the PPO reference is always kept)")
     ap.add_argument("--xla-threads", type=int, default=None,
@@ -211,7 +213,7 @@ def main(argv=None) -> int:
     from agents.train import set_threads
 
     set_threads(args.threads)
-    cands = candidates(args.n_envs, args.gradient_steps)
+    cands = candidates(args.n_envs, args.gradient_steps, args.train_freq)
     ref = cands[0].label
     if args.only:
         keys = [k.strip() for k in args.only.split(",") if k.strip()]
