@@ -24,7 +24,7 @@ ARCHIVES = {
     "quick_all_runs.tar.gz": ("all", "quick", 48,
                               {e: f"#### {e} (quick budget)" for e in
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
-    # three of the budget's eight agents so far (README, full budget on tracking: the other five are
+    # three of the budget's nine agents so far (README, full budget on tracking: the other six are
     # trained with the off-policy agents at PPO's budget)
     "tracking_full_runs.tar.gz": ("tracking", "full", 30,
                                   {"tracking": "### RL versus the paper's controller (full budget, tracking)"},
