@@ -12,6 +12,7 @@ import json
 import os
 from dataclasses import dataclass
 
+from .algos import LEGACY_LIBRARY, backend
 from .config import ENVS
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
@@ -45,6 +46,7 @@ AGENTS = {
     "ppo_ma": AgentSpec("ppo", True, None, "PPO (shared, per node)"),
     "sac": AgentSpec("sac", False, None, "SAC (centralised)"),
     "td3": AgentSpec("td3", False, None, "TD3 (centralised)"),
+    "crossq": AgentSpec("crossq", False, None, "CrossQ (centralised)"),
     "sac_ma": AgentSpec("sac", True, None, "SAC (shared, per node)"),
     "ppo_log": AgentSpec("ppo", False, None, "PPO (centralised, log-cost training)", (("reward", "log"),)),
     "ppo_sqrt": AgentSpec("ppo", False, None, "PPO (centralised, sqrt-cost training)", (("reward", "sqrt"),)),
@@ -60,6 +62,8 @@ BUDGETS = {
         "hyperparams": {
             "ppo": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "bc": {"episodes": 1, "epochs": 1}},
             "sac": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+            "td3": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+            "crossq": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
         },
     },
     "quick": {
@@ -71,8 +75,9 @@ BUDGETS = {
         "episodes": 20, "seeds": 10, "env_kwargs": {}, "curve_points": 10, "curve_episodes": 5,
         # sac_ma (SAC per node: 5 samples and gradient steps per env step, ~50 env steps/s) and
         # ppo_log (J/J_paper 21x and 67x at 400k on tracking) are available through --agents
-        "agents": {"ppo": 600_000, "ppo_ma": 300_000, "ppo_sqrt": 600_000, "sac": 50_000, "td3": 50_000,
-                   "ppo_res": 300_000, "ppo_res_ma": 150_000, "ppo_bc": 300_000},
+        # the off-policy agents at PPO's env steps (issue 21: equal budgets)
+        "agents": {"ppo": 600_000, "ppo_ma": 300_000, "ppo_sqrt": 600_000, "sac": 600_000, "td3": 600_000,
+                   "crossq": 600_000, "ppo_res": 300_000, "ppo_res_ma": 150_000, "ppo_bc": 300_000},
         "hyperparams": {},
     },
 }
@@ -100,10 +105,15 @@ TRAINING_KEYS = ("env", "agent", "seed", "steps", "hp", "env_kwargs", "curve_see
 """The part of a run's signature that defines its training (the rest, ``eval_seeds``, its evaluation)."""
 
 
-def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: bool = False) -> dict | None:
+def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: bool = False,
+                  library: str | None = None) -> dict | None:
     """The stored result of the run in ``path`` if it finished with this signature *and* was trained
     with these merged hyperparameters (its ``config.json``): editing a recipe file retrains the
     affected runs instead of reusing results of the old recipe. None otherwise.
+
+    ``library``: the run must also have been trained by this implementation (``config.json``
+    ``library``; :data:`agents.algos.LEGACY_LIBRARY` for runs that record none), so that installing
+    or removing the ``jax`` extra (SBX instead of SB3) never passes one library's result off as another's.
 
     ``training_only``: compare only the signature's :data:`TRAINING_KEYS` (the run was trained as
     ``sig`` asks, perhaps evaluated on other episodes)."""
@@ -111,8 +121,11 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
         with open(os.path.join(path, "result.json")) as fh:
             prev = json.load(fh)
         with open(os.path.join(path, "config.json")) as fh:
-            trained_with = json.load(fh).get("hyperparams")
-    except (OSError, ValueError):
+            config = json.load(fh)
+        trained_with = config.get("hyperparams")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if library is not None and config.get("library", LEGACY_LIBRARY) != library:
         return None
     old = prev.get("signature")
     if not isinstance(old, dict) or trained_with != json.loads(json.dumps(hyperparams)):
@@ -141,7 +154,8 @@ def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     a = AGENTS[spec["agent"]]
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
                             overrides=_training_overrides(spec) or None)
-    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only)
+    return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only,
+                         library=backend(a.algo).library)
 
 
 def _stored_model(spec: dict) -> dict | None:

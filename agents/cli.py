@@ -17,12 +17,13 @@ __all__ = ["add_parser"]
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("train", help="train an SB3 agent (PPO/SAC/TD3; shared PPO/SAC with --multi-agent)")
+    p = sub.add_parser("train", help="train an agent (PPO/SAC/TD3/CrossQ; shared PPO/SAC with --multi-agent)")
     # defaults of the run's identity are None here (applied in _train) so that --resume can tell
     # which options were given and check them against the run's config
     p.add_argument("--env", default=None,
                    help="tracking (default) | disturbance_rejection | hetero_mas | random_network, or a Gymnasium id")
-    p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3")
+    p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3 | crossq (the off-policy algorithms train with SBX when the jax "
+                        "extra is installed, else with stable-baselines3 / sb3-contrib)")
     p.add_argument("--multi-agent", action="store_true", default=None,
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
     p.add_argument("--timesteps", type=_positive_int, default=None,

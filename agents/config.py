@@ -32,7 +32,8 @@ only keys rl-zoo3 understands:
 - ``env_wrapper``: ``[{gymnasium.wrappers.RescaleAction: {min_action: -1, max_action: 1}}]``
   (the agent acts in ``[-1, 1]``, mapped onto the env's bounds; the only wrapper accepted)
 - ``policy_kwargs``: rl-zoo3's string ``"dict(net_arch=[64, 64], activation_fn=nn.Tanh)"``
-- ``noise_type`` (``normal``) and ``noise_std``: TD3/SAC action noise
+- ``noise_type`` (``normal``, ``ornstein-uhlenbeck``) and ``noise_std``: off-policy action noise
+  (:func:`agents.algos.make_action_noise`; ``pink`` too outside the sections rl-zoo3 reads)
 - ``lin_<x>`` schedules for ``learning_rate`` / ``clip_range``; the algorithm's constructor arguments
 
 Sections read by ``agents/`` only: ``default-ma``, ``<env>-ma`` (parameter sharing),
@@ -65,7 +66,7 @@ from typing import Any, Callable
 
 import yaml
 
-__all__ = ["ENVS", "ALGOS", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gym_factory",
+__all__ = ["ENVS", "ALGOS", "OFF_POLICY_ALGOS", "NOISE_TYPES", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gym_factory",
            "load_hyperparams", "read_hyperparams_file", "env_key", "check_env_name", "EnvNameError",
            "HyperparamsError", "ACTIVATIONS", "VARIANTS"]
 
@@ -76,8 +77,10 @@ from dobs_envs.registry import ENVIRONMENTS as _REGISTRY  # noqa: E402
 #: benchmark environments: short name -> (Gymnasium id, PettingZoo module), from dobs_envs.registry
 ENVS = {name: (e.gym_id, e.module) for name, e in _REGISTRY.items()}
 
-ALGOS = ("ppo", "sac", "td3")
+ALGOS = ("ppo", "sac", "td3", "crossq")
 MULTI_AGENT_ALGOS = ("ppo", "sac")
+#: the off-policy algorithms (replay buffer; action noise ``noise_type`` / ``noise_std``)
+OFF_POLICY_ALGOS = ("sac", "td3", "crossq")
 
 
 def env_key(env: str) -> str:
@@ -185,7 +188,10 @@ _UNSUPPORTED_KEYS = ("frame_stack", "vec_env_wrapper", "callback", "monitor_kwar
 #: the one wrapper accepted in ``env_wrapper``: the agent acts in [-1, 1]
 RESCALE_WRAPPER = "gymnasium.wrappers.RescaleAction"
 _RESCALE_ARGS = {"min_action": -1, "max_action": 1}
-_NOISE_TYPES = ("normal",)
+#: exploration noise types (``noise_type``; :func:`agents.algos.make_action_noise`)
+NOISE_TYPES = ("normal", "ornstein-uhlenbeck", "pink")
+#: the noise types rl-zoo3 understands (the only ones accepted in the sections it reads)
+ZOO_NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
 #: longest ``policy_kwargs`` / ``normalize`` string parsed
 _MAX_KWARGS_STRING = 10_000
 
@@ -298,8 +304,13 @@ def _canonical(section: dict, where: str, *, zoo: bool) -> dict:
             out["normalize_actions"] = _rescale_wrapper(value, where)
             continue
         elif key == "noise_type":
-            if value not in _NOISE_TYPES:
-                raise HyperparamsError(f"{where}: noise_type must be one of {_NOISE_TYPES}, got {value!r}")
+            if value is not None and value not in NOISE_TYPES:
+                raise HyperparamsError(f"{where}: noise_type must be one of {NOISE_TYPES} (or null: no action "
+                                       f"noise), got {value!r}")
+            if zoo and value is not None and value not in ZOO_NOISE_TYPES:
+                raise HyperparamsError(
+                    f"{where}: noise_type {value!r} is not an rl-zoo3 noise type ({', '.join(ZOO_NOISE_TYPES)}), "
+                    f"but rl-zoo3 reads this section; use it in --hyperparams overrides or an agents-only section")
         elif key == "noise_std":
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
                 raise HyperparamsError(f"{where}: noise_std must be a number >= 0, got {value!r}")

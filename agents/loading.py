@@ -4,7 +4,7 @@ or one of its checkpoints) into a :class:`TrainedAgent`, which acts on the task'
 Observations are normalised with the statistics saved with the model (``vecnormalize.pkl``); a
 multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEncoder` (the padding and
 one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
-loaded by the run's algorithm backend (:mod:`agents.algos`). ``model.zip`` and ``vecnormalize.pkl`` are
+loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`). ``model.zip`` and ``vecnormalize.pkl`` are
 pickles: load runs only from trusted sources.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from .algos import backend
+from .algos import BackendUnavailable, backend_of
 from .runs import RunDirError, load_or_refuse, run_files
 from .vec_env import SlotEncoder
 
@@ -52,7 +52,11 @@ class TrainedAgent:
         self.model_path = files.model
         self.algo = self.config["algo"]
         self.multi_agent = bool(self.config["multi_agent"])
-        self.model = load_or_refuse(files.model, lambda: backend(self.algo).load(files.model, device=device))
+        try:
+            algo_backend = backend_of(self.algo, self.config.get("library"))
+        except BackendUnavailable as exc:
+            raise RunDirError(f"{files.run_dir!r}: {exc}") from None
+        self.model = load_or_refuse(files.model, lambda: algo_backend.load(files.model, device=device))
         vn = files.vecnormalize
         self.vecnorm = None
         if vn is not None:

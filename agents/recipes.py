@@ -17,7 +17,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from .config import HyperparamsError, env_key, gym_id, load_hyperparams, read_hyperparams_file
+from .config import OFF_POLICY_ALGOS, HyperparamsError, env_key, gym_id, load_hyperparams, read_hyperparams_file
 
 __all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "recipe_file_section", "merge_overrides", "EXTRA_KEYS"]
 
@@ -34,7 +34,8 @@ class Recipe:
     as strings, ``policy_kwargs.activation_fn`` a name); ``normalize``: ``False`` or the
     ``VecNormalize`` arguments (``gamma`` included); ``train_env_kwargs``: the recipe's
     training-only env options; ``bc``: the warm start's ``{episodes, noise, epochs, lr}``
-    (``bc`` variant); ``action_noise_sigma``: TD3/SAC Gaussian action noise.
+    (``bc`` variant); ``action_noise_sigma`` and ``action_noise_type``: the off-policy algorithms'
+    action noise (``noise_std``, ``noise_type``; :func:`agents.algos.make_action_noise`), None without.
     """
 
     policy: str
@@ -49,6 +50,7 @@ class Recipe:
     bc: dict | None
     action_noise_sigma: float | None
     hyperparams: dict
+    action_noise_type: str | None = None
 
     def as_dict(self) -> dict:
         """Everything but the merged ``hyperparams`` (plain data)."""
@@ -82,9 +84,9 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
         b = dict(hp.get("bc") or {})
         bc = {"episodes": int(b.get("episodes", 20)), "noise": float(b.get("noise", 0.1)),
               "epochs": int(b.get("epochs", 30)), "lr": float(b.get("lr", 1e-3))}
-    sigma = None
-    if hp.get("noise_type") and algo in ("td3", "sac"):
-        sigma = float(hp.get("noise_std", 0.1))
+    sigma = noise_type = None
+    if hp.get("noise_type") and algo in OFF_POLICY_ALGOS:
+        sigma, noise_type = float(hp.get("noise_std", 0.1)), str(hp["noise_type"])
     algo_kw = {k: v for k, v in hp.items() if k not in EXTRA_KEYS}
     algo_kw["policy_kwargs"] = dict(algo_kw.get("policy_kwargs") or {})
     return Recipe(policy=hp.get("policy", "MlpPolicy"), algo_kwargs=algo_kw, n_envs=int(hp.get("n_envs", 1)),
@@ -92,7 +94,7 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
                   normalize_actions=bool(hp.get("normalize_actions", False)) and residual_scale is None,
                   agent_id=bool(hp.get("agent_id", False)) and multi_agent,
                   train_env_kwargs=dict(hp.get("env_kwargs") or {}), residual_scale=residual_scale, bc=bc,
-                  action_noise_sigma=sigma, hyperparams=hp)
+                  action_noise_sigma=sigma, hyperparams=hp, action_noise_type=noise_type)
 
 
 def recipe_file_section(path: str, env_name: str) -> dict:

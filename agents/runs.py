@@ -120,7 +120,8 @@ def read_run_config(path: str, *, require_model: bool = True) -> dict:
     checkpoint ``path``), validated; with ``require_model``, the model file must exist too.
 
     The run's ``algo`` must have a backend (:data:`agents.algos.BACKENDS`) implemented by the
-    ``library`` the run records (:data:`agents.algos.LEGACY_LIBRARY` when it records none)."""
+    ``library`` the run records (:data:`agents.algos.LEGACY_LIBRARY` when it records none); whether
+    that library is installed is checked when the model is loaded (:func:`agents.algos.backend_of`)."""
     run, ckpt = _run_dir_of(path)
     if not os.path.isdir(run):
         raise RunDirError(f"run directory {run!r} does not exist (expected the --out of a training run)")
@@ -137,10 +138,10 @@ def read_run_config(path: str, *, require_model: bool = True) -> dict:
         raise RunDirError(f"{cfg_path} lacks {missing}")
     if not isinstance(cfg["algo"], str) or cfg["algo"] not in BACKENDS:
         raise RunDirError(f"{cfg_path}: unknown algo {cfg['algo']!r}")
-    library, implementation = cfg.get("library", LEGACY_LIBRARY), BACKENDS[cfg["algo"]].library
-    if library != implementation:
+    library, implementations = cfg.get("library", LEGACY_LIBRARY), [b.library for b in BACKENDS[cfg["algo"]]]
+    if library not in implementations:
         raise RunDirError(f"{cfg_path}: the run was trained with {library!r}; {cfg['algo']!r} is implemented here "
-                          f"by {implementation!r}")
+                          f"by {' or '.join(map(repr, implementations))}")
     if require_model and ckpt is None and not os.path.isfile(os.path.join(run, "model.zip")):
         hint = ""
         if cfg.get("status") == RUNNING:

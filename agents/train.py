@@ -1,6 +1,6 @@
 """Train SB3 agents on the centralised Gymnasium envs or (parameter-shared) on the PettingZoo envs.
 
-- centralised: PPO, SAC, TD3 on ``dobs_envs/<Name>-v0`` (one agent acting for all
+- centralised: PPO, SAC, TD3, CrossQ on ``dobs_envs/<Name>-v0`` (one agent acting for all
   controller nodes) or any Gymnasium id;
 - multi-agent: PPO and SAC with one policy shared by every controller node (one VecEnv
   slot per (copy, agent)).
@@ -37,7 +37,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from .algos import backend
+from .algos import AlgoBackend, BackendUnavailable, backend, backend_of
 from .config import MULTI_AGENT_ALGOS, gym_factory
 from .core_vec_env import CoreVecEnv
 from .loading import TrainedAgent, load_agent
@@ -159,10 +159,11 @@ class _Setup:
     config: dict
 
 
-def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, recipe: Recipe, timesteps: int,
-           seed: int, env_kwargs: dict | None, checkpoint_freq: int | None) -> _Setup:
+def _setup(env, name: str, algo_backend: AlgoBackend, *, multi_agent: bool, hybrid: str | None, recipe: Recipe,
+           timesteps: int, seed: int, env_kwargs: dict | None, checkpoint_freq: int | None) -> _Setup:
     """The training VecEnv (normalised when the recipe says so, not yet loaded from a save) and the
-    run's configuration (``config.json``) from the ``recipe``."""
+    run's configuration (``config.json``) from the ``recipe``, trained by ``algo_backend``."""
+    algo = algo_backend.name
     from stable_baselines3.common.vec_env import VecNormalize
 
     user_kw = dict(env_kwargs or {})
@@ -183,7 +184,7 @@ def _setup(env, name: str, algo: str, *, multi_agent: bool, hybrid: str | None, 
         venv = VecNormalize(venv, **norm)
     ckpt = timesteps // 4 if checkpoint_freq is None else int(checkpoint_freq)
     config = {
-        "env": name, "algo": algo, **backend(algo).provenance(),  # library, library_version
+        "env": name, "algo": algo, **algo_backend.provenance(),  # library, library_version
         "multi_agent": multi_agent, "hybrid": hybrid, "residual_scale": residual_scale,
         "bc": None, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
         "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
@@ -200,7 +201,7 @@ def _learn(model, venv, config: dict, out: str, *, progress: bool, callbacks: li
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     algo, multi_agent, n_agents = config["algo"], config["multi_agent"], config["n_agents"]
-    algo_backend = backend(algo)
+    algo_backend = backend_of(algo, config.get("library"))
     timesteps, ckpt = config["timesteps"], config["checkpoint_freq"]
     sb3_steps = timesteps * n_agents
     start = int(model.num_timesteps)
@@ -290,12 +291,13 @@ def train(env, algo: str = "ppo", *, multi_agent: bool = False, timesteps: int |
     recipe = resolve_recipe(algo, name, multi_agent=multi_agent, hybrid=hybrid, overrides=hyperparams)
     set_threads(threads)
     timesteps = int(timesteps if timesteps is not None else recipe.n_timesteps)
-    s = _setup(env, name, algo, multi_agent=multi_agent, hybrid=hybrid, recipe=recipe, timesteps=timesteps,
+    algo_backend = backend(algo)  # the preferred implementation that imports (a fallback says so on stderr)
+    s = _setup(env, name, algo_backend, multi_agent=multi_agent, hybrid=hybrid, recipe=recipe, timesteps=timesteps,
                seed=seed, env_kwargs=env_kwargs, checkpoint_freq=checkpoint_freq)
     out = out or default_run_dir(name, algo, multi_agent, seed)
     os.makedirs(out, exist_ok=True)
     clear_run(out)
-    model = backend(algo).make(recipe, s.venv, seed=seed, verbose=verbose, tensorboard=tensorboard)
+    model = algo_backend.make(recipe, s.venv, seed=seed, verbose=verbose, tensorboard=tensorboard)
     if hybrid == "bc":
         bc = recipe.bc
         kw = s.config["train_env_kwargs"]
@@ -330,13 +332,16 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     recipe = recipe_from_hyperparams(algo, name, dict(cfg["hyperparams"]), multi_agent=bool(cfg["multi_agent"]),
                                      hybrid=cfg.get("hybrid"))
     seed = resume_seed(int(cfg["seed"]), point.sb3_timesteps // n_agents)  # never an evaluation/tuning episode
-    s = _setup(name, name, algo, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), recipe=recipe,
+    try:  # the implementation that trained the run, never another library
+        algo_backend = backend_of(algo, cfg.get("library"))
+    except BackendUnavailable as exc:
+        raise RunDirError(f"{path!r}: {exc}") from None
+    s = _setup(name, name, algo_backend, multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"), recipe=recipe,
                timesteps=int(cfg["timesteps"]), seed=seed, env_kwargs=cfg.get("env_kwargs"),
                checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))
     venv = s.venv
     if point.vecnormalize is not None:
         venv = load_or_refuse(point.vecnormalize, lambda: VecNormalize.load(point.vecnormalize, venv.venv))
-    algo_backend = backend(algo)
     custom = algo_backend.custom_objects(recipe, venv)  # rebuilt, not unpickled closures
     model = load_or_refuse(point.model, lambda: algo_backend.load(
         point.model, env=venv, device="auto", custom_objects=custom, tensorboard_log=tensorboard, verbose=verbose))

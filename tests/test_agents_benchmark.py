@@ -173,6 +173,31 @@ def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
     assert _finished_run(copy, sig, today) is None
 
 
+def test_finished_runs_are_reused_only_with_the_same_library(tiny_run, tmp_path):
+    """A cached result counts only if the implementation that would train the run today trained it
+    (config.json ``library``; stable-baselines3 for runs that record none): installing the jax extra
+    (SBX) must never pass an SB3 result off as SBX's, or the reverse."""
+    import shutil
+
+    from agents.benchmark import _finished_run
+    from agents.recipes import resolve_recipe
+
+    out, _, _ = tiny_run
+    run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")
+    sig = json.load(open(os.path.join(run, "result.json")))["signature"]
+    today = resolve_recipe("ppo", "tracking", overrides=dict(TINY["hyperparams"]["ppo"])).hyperparams
+    assert json.load(open(os.path.join(run, "config.json")))["library"] == "stable-baselines3"
+    assert _finished_run(run, sig, today, library="stable-baselines3")["cached"] is True
+    assert _finished_run(run, sig, today, library="sbx-rl") is None
+    legacy = str(tmp_path / "legacy")
+    shutil.copytree(run, legacy)
+    cfg = json.load(open(os.path.join(legacy, "config.json")))
+    del cfg["library"], cfg["library_version"]
+    json.dump(cfg, open(os.path.join(legacy, "config.json"), "w"))
+    assert _finished_run(legacy, sig, today, library="stable-baselines3")["cached"] is True
+    assert _finished_run(legacy, sig, today, library="sbx-rl") is None
+
+
 def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_run):
     """A run stores its evaluation's errors averaged over the episodes (not every episode's); the
     error-norm figure's mean of the runs' means is the mean over every (run, episode), episodes

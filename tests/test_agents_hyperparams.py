@@ -50,7 +50,7 @@ def test_frozen_recipes_cover_every_env_and_mode():
     for env in ENVS:
         for algo, ma, variant in [("ppo", False, None), ("ppo", True, None), ("ppo", False, "residual"),
                                   ("ppo", True, "residual"), ("ppo", False, "bc"), ("sac", False, None),
-                                  ("sac", True, None), ("td3", False, None)]:
+                                  ("sac", True, None), ("td3", False, None), ("crossq", False, None)]:
             assert (algo, env, ma, variant) in cases
 
 
@@ -124,7 +124,8 @@ BASE = """default: &default
     ("default-ma:\n  callback: my.module.Callback\n", "'callback' is an rl-zoo3 option"),
     ("default-ma:\n  normalize: \"__import__('os')\"\n", "normalize"),
     ('"dobs_envs/Tracking-v0":\n  <<: *default\n  policy_kwargs: {activation_fn: tanh}\n', "string form"),
-    ("default-ma:\n  noise_type: ornstein-uhlenbeck\n", "noise_type"),
+    ("default-ma:\n  noise_type: uniform\n", "noise_type must be one of"),
+    ('"dobs_envs/Tracking-v0":\n  <<: *default\n  noise_type: pink\n', "not an rl-zoo3 noise type"),
     ("default-ma: [1, 2]\n", "must be a mapping"),
 ])
 def test_file_errors_name_the_section_and_key(tmp_path, extra, match):

@@ -155,7 +155,14 @@ def test_resume_continues_from_the_saved_model_and_normaliser(interrupted_ppo, c
 
 
 def _params(model) -> np.ndarray:
-    return np.concatenate([p.detach().cpu().numpy().ravel() for p in model.policy.parameters()])
+    """The policy's parameters, flat: torch modules (stable-baselines3) or flax parameter trees (SBX)."""
+    ps = [p.detach().cpu().numpy().ravel() for p in model.policy.parameters()]
+    if not ps:  # SBX: the actor's and critics' train states hold the parameters
+        import jax
+
+        states = [getattr(model.policy, n) for n in ("actor_state", "qf_state") if hasattr(model.policy, n)]
+        ps = [np.asarray(x).ravel() for st in states for x in jax.tree_util.tree_leaves(st.params)]
+    return np.concatenate(ps)
 
 
 class _AtStart:

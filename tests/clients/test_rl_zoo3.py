@@ -84,7 +84,7 @@ def test_rl_zoo3_reads_the_recipe_agents_trains_with(algo, name, zoo_readings):
     kw = dict(zoo["kwargs"])
     assert kw.pop("policy") == ours.policy
     noise_type, noise_std = kw.pop("noise_type", None), kw.pop("noise_std", None)
-    assert (noise_std if noise_type == "normal" else None) == ours.action_noise_sigma
+    assert (noise_type, noise_std) == (ours.action_noise_type, ours.action_noise_sigma)
 
     ours_kw = dict(ours.algo_kwargs)
     ours_pk, zoo_pk = dict(ours_kw.pop("policy_kwargs")), dict(kw.pop("policy_kwargs"))
