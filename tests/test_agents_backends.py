@@ -154,9 +154,12 @@ def _stop_group(proc: subprocess.Popen, timeout: float = 60.0) -> None:
 
 def _env() -> dict:
     """The test's environment for child processes, with this checkout first on the path (Ray's workers
-    import the benchmark's tasks by name)."""
+    import the benchmark's tasks by name). Ray's token authentication off for the head and its clients
+    alike: with a ``~/.ray/auth_token`` left on the machine, Ray 2.60's ``ray start --head`` required the
+    token while ``ray status`` / ``ray.init(address=...)`` (mode 'disabled') did not send it, and the
+    head never answered (measured in CI)."""
     return {**os.environ, "PYTHONPATH": os.pathsep.join([ROOT, *filter(None, [os.environ.get("PYTHONPATH")])]),
-            "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
+            "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0", "RAY_AUTH_MODE": "disabled"}
 
 
 @pytest.mark.slow
