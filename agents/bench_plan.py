@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .algos import LEGACY_LIBRARY, backend
 from .config import ENVS
@@ -18,7 +18,7 @@ from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
            "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
-           "TRAINING_KEYS"]
+           "TRAINING_KEYS", "RECIPE_SUFFIX", "agent_spec", "is_agent_name", "recipe_provenance"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,34 @@ BUDGETS = {
     },
 }
 
+#: ``--recipe AGENT=FILE`` (:func:`plan_runs` ``recipes``) adds the agent ``AGENT + RECIPE_SUFFIX``: AGENT's
+#: runs trained with the recipe file's section, in their own run directories, as a row of their own
+RECIPE_SUFFIX = "@recipe"
+
+
+def is_agent_name(name: str) -> bool:
+    """Whether ``name`` is a benchmark agent: a key of :data:`AGENTS`, or one followed by :data:`RECIPE_SUFFIX`."""
+    base = name[:-len(RECIPE_SUFFIX)] if name.endswith(RECIPE_SUFFIX) else name
+    return base in AGENTS
+
+
+def agent_spec(name: str) -> AgentSpec:
+    """The :class:`AgentSpec` of the agent ``name`` (:func:`is_agent_name`): a recipe-file agent
+    ``<agent>@recipe`` is its base agent with its own label."""
+    if name.endswith(RECIPE_SUFFIX) and name[:-len(RECIPE_SUFFIX)] in AGENTS:
+        a = AGENTS[name[:-len(RECIPE_SUFFIX)]]
+        return AgentSpec(a.algo, a.multi_agent, a.hybrid, f"{a.label}, --recipe file", a.train_env_kwargs)
+    return AGENTS[name]
+
+
+def recipe_provenance(path: str) -> dict:
+    """``{"file": path, "sha256": hex digest of its bytes}``: which recipe file a benchmark trained with."""
+    import hashlib
+
+    with open(path, "rb") as fh:
+        return {"file": path, "sha256": hashlib.sha256(fh.read()).hexdigest()}
+
+
 #: the information columns (what a policy observes)
 INFO_POOLED = "pooled: every node's obs"
 INFO_OWN_NODE = "own node + neighbours"
@@ -138,9 +166,12 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
 
 
 def _training_overrides(spec: dict) -> dict:
-    """The budget's hyperparameter overrides of a run plus its agent's training-only env options."""
-    a = AGENTS[spec["agent"]]
-    hp = dict(spec["hp"])
+    """The budget's hyperparameter overrides of a run plus its agent's training-only env options; a
+    recipe-file agent's: its file's section with the budget's overrides over it (as over the shipped recipe)."""
+    from .recipes import merge_overrides
+
+    a = agent_spec(spec["agent"])
+    hp = merge_overrides(spec.get("recipe"), spec["hp"])
     if a.train_env_kwargs:
         hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
     return hp
@@ -151,7 +182,7 @@ def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     (``training_only``: see :func:`_finished_run`)."""
     from .recipes import resolve_recipe
 
-    a = AGENTS[spec["agent"]]
+    a = agent_spec(spec["agent"])
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
                             overrides=_training_overrides(spec) or None)
     return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only,
@@ -199,15 +230,21 @@ def stored_answer(spec: dict) -> tuple[str, dict | None]:
 
 
 # ---------------------------------------------------------------------- the runs of an invocation
-def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None) -> tuple[dict, int]:
+def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None,
+          recipes: dict | None = None) -> tuple[dict, int]:
     B = BUDGETS[budget]
+    default = max(B["agents"].values())
     plan = dict(B["agents"])
+    variants = [k + RECIPE_SUFFIX for k in recipes or {}]
     if agents is not None:
-        unknown = sorted(set(agents) - set(AGENTS))
+        unknown = sorted(set(agents) - set(AGENTS) - set(variants))
         if unknown:
-            raise ValueError(f"unknown agents {unknown}; choose from {sorted(AGENTS)}")
-        default = max(B["agents"].values())
-        plan = {k: plan.get(k, default) for k in agents}
+            raise ValueError(f"unknown agents {unknown}; choose from {sorted(AGENTS)}"
+                             + (f" or {sorted(variants)}" if variants else ""))
+        plan = {k: plan.get(k, default) for k in agents if k not in variants}
+    for v in variants:  # equal budgets: a recipe-file agent trains as many steps as its base agent
+        base = v[:-len(RECIPE_SUFFIX)]
+        plan[v] = B["agents"].get(base, default)
     if timesteps is not None:
         if timesteps < 1:
             raise ValueError(f"timesteps must be >= 1, got {timesteps}")
@@ -223,7 +260,8 @@ class BenchmarkPlan:
     """What a benchmark invocation trains and evaluates (:func:`plan_runs`).
 
     ``specs`` holds one training run per (env, agent, training seed), longest first; a run's
-    ``path`` is ``<out>/models/<env>/<budget>/<agent>/s<seed>``.
+    ``path`` is ``<out>/models/<env>/<budget>/<agent>/s<seed>``. ``recipes``: the recipe-file agents,
+    ``{"<agent>@recipe": {"agent", "file", "sha256"}}`` (:func:`plan_runs`).
     """
 
     envs: list
@@ -234,13 +272,25 @@ class BenchmarkPlan:
     curve_seeds: list
     env_kwargs: dict
     specs: list
+    recipes: dict = field(default_factory=dict)
 
 
 def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
               eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
-              agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1) -> BenchmarkPlan:
+              agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1,
+              recipes: dict | None = None) -> BenchmarkPlan:
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
-    written). With :func:`pending_runs` it tells which of them a stored result already answers."""
+    written). With :func:`pending_runs` it tells which of them a stored result already answers.
+
+    ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
+    Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
+    budget's steps, but with the file's section for the env (:func:`agents.recipes.recipe_file_section`:
+    the Gymnasium id's, else ``default``; the budget's overrides apply over it as over the shipped
+    recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
+    shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
+    ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
+    :class:`agents.config.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has no
+    section for an env."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
     env_names = list(ENVS) if env == "all" else [env]
@@ -248,7 +298,11 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
         if e not in ENVS:
             raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
     B = BUDGETS[budget]
-    plan, n_seeds = _plan(budget, agents, timesteps, seeds)
+    recipes = dict(recipes or {})
+    bad = sorted(set(recipes) - set(AGENTS))
+    if bad:
+        raise ValueError(f"recipe files for unknown agents {bad}; choose from {sorted(AGENTS)}")
+    plan, n_seeds = _plan(budget, agents, timesteps, seeds, recipes)
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
@@ -257,20 +311,49 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
     curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
+    from .recipes import merge_overrides, recipe_file_section
+
+    # the files' sections, read and validated once per env (nothing named in a file is imported)
+    sections = {(k, e): recipe_file_section(f, e) for k, f in recipes.items() for e in env_names}
+    for (k, e), section in sections.items():
+        _check_constructor_keys(k, e, recipes[k], merge_overrides(section, B["hyperparams"].get(AGENTS[k].algo)))
+    provenance = {k + RECIPE_SUFFIX: {"agent": k, **recipe_provenance(f)} for k, f in recipes.items()}
     specs = []
     for e in env_names:
         for key, steps in plan.items():
-            a = AGENTS[key]
+            a = agent_spec(key)
             hp = dict(B["hyperparams"].get(a.algo, {}))
+            extra = {}
+            if key in provenance:  # not in the signature: the stored run's hyperparameters tell the recipe
+                extra = {"recipe": sections[(provenance[key]["agent"], e)],
+                         "recipe_file": {k: provenance[key][k] for k in ("file", "sha256")}}
             for s in range(seed, seed + n_seeds):
                 specs.append({"env": e, "agent": key, "seed": s, "steps": int(steps), "hp": hp,
                               "env_kwargs": env_kwargs, "eval_seeds": eval_seeds, "curve_seeds": curve_seeds,
                               "curve_every": max(1, int(steps) // B["curve_points"]), "threads": threads,
-                              "path": os.path.join(out, "models", e, budget, key, f"s{s}")})
+                              "path": os.path.join(out, "models", e, budget, key, f"s{s}"), **extra})
     # longest jobs first: better packing on the workers
-    specs.sort(key=lambda sp: -sp["steps"] * (5 if AGENTS[sp["agent"]].multi_agent else 1))
+    specs.sort(key=lambda sp: -sp["steps"] * (5 if agent_spec(sp["agent"]).multi_agent else 1))
     return BenchmarkPlan(env_names, budget, plan, list(range(seed, seed + n_seeds)), eval_seeds, curve_seeds,
-                         env_kwargs, specs)
+                         env_kwargs, specs, provenance)
+
+
+def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:
+    """:class:`agents.config.HyperparamsError` naming the keys of the recipe file ``path`` that ``agent``'s
+    algorithm class does not take, before anything trains (every run would fail the same way)."""
+    import inspect
+
+    from .config import HyperparamsError
+    from .recipes import resolve_recipe
+
+    a = AGENTS[agent]
+    recipe = resolve_recipe(a.algo, env, multi_agent=a.multi_agent, hybrid=a.hybrid, overrides=overrides)
+    cls = backend(a.algo).load_class()
+    params = inspect.signature(cls.__init__).parameters
+    unknown = sorted(set(recipe.algo_kwargs) - set(params))
+    if unknown and not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        raise HyperparamsError(f"{path}: {cls.__name__} ({agent}) takes no argument(s) {unknown} (its section for "
+                               f"env {env!r})")
 
 
 class RunConflictError(ValueError):

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from .bench_plan import AGENTS, ANALYTIC_INFO, PAPER, BenchmarkPlan
+from .bench_plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
 from .bench_tasks import mean_trajectory
 from .evaluate import STEADY_S, TRANSIENT_S
 from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
@@ -304,6 +304,11 @@ CSV_COLUMNS = ["policy", "kind", "information", "runs", "episodes", "env_steps",
        "control_effort_mean", "rms_estimation_error_mean"]
 
 
+def _recipe_files(plan: BenchmarkPlan) -> dict:
+    """The recipe-file agents' provenance, ``{agent: {"agent", "label", "file", "sha256"}}`` (``{}`` without)."""
+    return {k: {**v, "label": agent_spec(k).label} for k, v in plan.recipes.items()}
+
+
 def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, analytic: dict) -> tuple[list, dict]:
     """Aggregate ``env``'s runs and write ``<out>/<env>/results.{json,md,csv}``, ``error_norms.png`` and
     ``learning_curves.png``; returns ``(rows, results document)``.
@@ -317,7 +322,7 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
     paper_cost = np.array([ep["cost"] for ep in paper["episodes"]])
     payloads, rows, curves, detail, train_s = {}, [], {}, {}, {}
     for key in plan.steps:
-        a = AGENTS[key]
+        a = agent_spec(key)
         runs = [results[(env, key, s)] for s in training_seeds]
         payloads[a.label] = runs
         rows.append(_aggregate(a.label, a.kind, runs, paper_cost, information=a.information, steps=plan.steps[key]))
@@ -336,6 +341,7 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
         "env": env, "budget": budget, "training_seeds": list(training_seeds), "eval_seeds": plan.eval_seeds,
         "curve_seeds": plan.curve_seeds, "episodes": len(plan.eval_seeds), "env_kwargs": plan.env_kwargs,
         "train_steps": plan.steps, "train_seconds": train_s, "paper_cost": paper_cost.tolist(),
+        "recipe_files": _recipe_files(plan),
         "statistics": STATISTICS_DOC,
         "metrics_doc": {
             "cost_ratio": "J_policy / J_paper on the same episode; J = -return (LQ cost incl. termination penalty)",
@@ -368,7 +374,7 @@ def write_summary(out: str, plan: BenchmarkPlan, per_env_rows: dict, docs: dict,
     _plot_summary(per_env_rows, os.path.join(out, "summary.png"),
                   f"{plan.budget} budget: cost relative to the paper's controller")
     summary = {"budget": plan.budget, "envs": plan.envs, "training_seeds": list(plan.training_seeds),
-               "eval_seeds": plan.eval_seeds, **extra,
+               "eval_seeds": plan.eval_seeds, "recipe_files": _recipe_files(plan), **extra,
                "statistics": STATISTICS_DOC,
                "tables": {e: docs[e]["table"] for e in plan.envs},
                "results": {e: per_env_rows[e] for e in plan.envs},

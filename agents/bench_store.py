@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import os
 
-from .bench_plan import AGENTS, BUDGETS
+from .bench_plan import BUDGETS, is_agent_name
 from .config import ENVS
 from .runs import clear_run
 
@@ -56,7 +56,7 @@ def _models_foreign(out: str) -> tuple[list[str], int]:
     """``(entries of out/models outside the layout models/<env>/<budget>/<agent>/s<seed>/<run files>, runs)``."""
     bad, runs = [], 0
     root = os.path.join(out, "models")
-    levels = (set(ENVS), set(BUDGETS), set(AGENTS))
+    levels = (set(ENVS).__contains__, set(BUDGETS).__contains__, is_agent_name)
     def walk(path: str, rel: str, depth: int) -> None:  # noqa: E306
         nonlocal runs
         for f in sorted(os.listdir(path)):
@@ -64,7 +64,7 @@ def _models_foreign(out: str) -> tuple[list[str], int]:
             if not os.path.isdir(p):
                 bad.append(r)
             elif depth < 3:
-                if f in levels[depth]:
+                if levels[depth](f):
                     walk(p, r, depth + 1)
                 else:
                     bad.append(r)
@@ -85,7 +85,7 @@ def foreign_entries(out: str) -> list[str]:
     ``models/<env>/<budget>/<agent>/s<seed>/`` (run files: config.json, model.zip,
     vecnormalize.pkl, replay_buffer.pkl, curve.json, result.json, checkpoints/), ``<env>/results.{json,md,csv}``,
     ``<env>/error_norms.png``, ``<env>/learning_curves.png``, ``summary.json`` and ``summary.png``
-    (``<env>``, ``<budget>``, ``<agent>``: the known names). An entry outside that layout is foreign.
+    (``<env>``, ``<budget>``, ``<agent>``: the known names, ``<agent>@recipe`` included). An entry outside that layout is foreign.
     The output files (``summary.*``, ``<env>/*``) are the benchmark's only when the marker is there,
     or, in a directory of a benchmark older than the marker, when ``models/`` holds at least one run
     of the layout (with its ``config.json``); without either, they are the user's (foreign).

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from .bench_plan import AGENTS, ANALYTIC, _run_signature, _training_overrides
+from .bench_plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
 from .bench_store import RECORD_FILES, read_run_files
 from .config import gym_factory, parallel_factory
 from .evaluate import evaluate_policy
@@ -47,14 +47,15 @@ def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``run_dir`` on the spec's episodes: the run's ``result.json`` document."""
     from .loading import load_agent
 
-    a = AGENTS[spec["agent"]]
+    a = agent_spec(spec["agent"])
     agent = load_agent(run_dir)
     eval_env = (parallel_factory if a.multi_agent else gym_factory)(spec["env"], spec["env_kwargs"])()
     res = evaluate_policy(eval_env, agent.policy_for(eval_env), len(spec["eval_seeds"]), spec["eval_seeds"][0],
                           parallel=a.multi_agent)
     eval_env.close()
     return {"signature": _run_signature(spec), "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
-            "curve": curve, **_episode_payload(res), "cached": False}
+            "curve": curve, **_episode_payload(res), "cached": False,
+            **({"recipe_file": spec["recipe_file"]} if "recipe_file" in spec else {})}
 
 
 def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
@@ -64,7 +65,7 @@ def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
     from .train import set_threads, train
 
     set_threads(spec["threads"])
-    a = AGENTS[spec["agent"]]
+    a = agent_spec(spec["agent"])
     env, env_kwargs = spec["env"], spec["env_kwargs"]
     with tempfile.TemporaryDirectory(prefix="run-", dir=scratch) as path:
         n_agents = len(parallel_factory(env, env_kwargs)().possible_agents) if a.multi_agent else 1

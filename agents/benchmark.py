@@ -7,7 +7,9 @@
    (``--backend``: worker processes by default, ``--workers`` of them, one per core; or Ray
    tasks on a local Ray or a cluster, :mod:`agents.bench_exec`): pure RL (centralised PPO,
    parameter-shared PPO; ``full`` adds SAC, TD3 and PPO trained on the sqrt cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
-   behaviour cloning), each with the recipe of ``agents/hyperparams/<algo>.yaml``.
+   behaviour cloning), each with the recipe of ``agents/hyperparams/<algo>.yaml``; ``--recipe
+   AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
+   tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
    Each run records its learning curve (:mod:`agents.curves`). A finished run is
    reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
    so an interrupted benchmark resumes where it stopped.
@@ -47,7 +49,7 @@ import time
 from .bench_exec import BACKENDS, Job, make_backend
 # the names below are re-exported: ``agents.benchmark`` stays the public entry of the split modules
 from .bench_plan import (AGENTS, ANALYTIC, ANALYTIC_INFO, BUDGETS, CURVE_SEED, INFO_OWN_NODE,  # noqa: F401
-                         INFO_POOLED, PAPER, REEVALUATE, REUSE, TRAINING_KEYS, AgentSpec, BenchmarkPlan,
+                         INFO_POOLED, PAPER, RECIPE_SUFFIX, REEVALUATE, REUSE, TRAINING_KEYS, AgentSpec, BenchmarkPlan,
                          RunConflictError, _finished_run, _run_signature, _stored_model, _stored_result,
                          _training_overrides, pending_runs, plan_runs, reevaluated_runs, replaced_runs, stored_answer)
 from .bench_report import (PAPER_NOTES, STATISTICS_DOC, SUMMARY_XMAX, TABLE_COLUMNS, _aggregate,  # noqa: F401
@@ -88,7 +90,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                   eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
                   agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
                   progress: bool = True, threads: int | None = 1, overwrite: bool = False,
-                  backend: str = "process", address: str | None = None) -> dict:
+                  backend: str = "process", address: str | None = None, recipes: dict | None = None) -> dict:
     """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
 
     Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's).
@@ -99,6 +101,8 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     ``"host:port"``). The numbers do not depend on the backend; a stored run is reused by any.
     The driver writes every run's record as it arrives, so Ctrl-C keeps every finished run.
     :func:`plan_runs` and :func:`pending_runs` tell beforehand what it would train.
+    ``recipes``: ``{agent: recipe file}``: adds the agents ``<agent>@recipe`` trained with the file's
+    section (:func:`plan_runs`); the files' paths and SHA-256 are recorded in the results and summary.
 
     Raises
     ------
@@ -109,7 +113,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     """
     t_start = time.perf_counter()
     P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
-                  agents=agents, seeds=seeds, threads=threads)
+                  agents=agents, seeds=seeds, threads=threads, recipes=recipes)
     be = make_backend(backend, workers=workers, address=address)  # checks the arguments before any write
     claim_out_dir(out, overwrite=overwrite)  # refuses a directory holding files the benchmark did not write
     clash = replaced_runs(pending_runs(P))

@@ -88,6 +88,12 @@ def add_parser(sub) -> None:
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
+    p.add_argument("--recipe", action="append", default=None, metavar="AGENT=FILE",
+                   help="also train AGENT with the recipe file FILE (rl-zoo3 format, e.g. dobs-envs tune's best.yml; "
+                        "its section for the env: the Gymnasium id's, else default; the budget's overrides apply over "
+                        "it) as the agent AGENT@recipe, with AGENT's budget, in run directories of its own and a "
+                        "table row of its own next to AGENT's; repeatable (one file per agent); --agents may name "
+                        "AGENT@recipe to train only the file's runs")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--overwrite", action="store_true",
                    help="retrain runs whose directory holds a finished run of another configuration or recipe "
@@ -362,15 +368,33 @@ def _benchmark(args) -> int:
     from .bench_exec import RAY_EXTRA
     from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
+    from .bench_plan import RECIPE_SUFFIX
+    from .config import HyperparamsError
+
     t0 = time.perf_counter()
+    recipes = {}
+    for item in args.recipe or []:
+        name, sep, path = item.partition("=")
+        name = name.strip()
+        if not sep or not name or not path:
+            _usage_error(f"--recipe {item!r}: expected AGENT=FILE, e.g. ppo=runs/tune/best.yml")
+        if name not in AGENTS:
+            _usage_error(f"--recipe {item!r}: unknown agent {name!r}; choose from {sorted(AGENTS)}")
+        if name in recipes:
+            _usage_error(f"--recipe: two files for agent {name!r} ({recipes[name]!r}, {path!r}); give one per agent")
+        if not os.path.isfile(path):
+            _usage_error(f"--recipe {item!r}: recipe file {path!r} does not exist")
+        recipes[name] = path
     agents = None
     if args.agents is not None:
         agents = [a.strip() for a in args.agents.split(",")]
-        unknown = [a for a in agents if a not in AGENTS]
+        variants = [k + RECIPE_SUFFIX for k in recipes]
+        unknown = [a for a in agents if a not in AGENTS and a not in variants]
         if not args.agents.strip():
             _usage_error(f"--agents '': expected a comma-separated subset of {','.join(AGENTS)}")
         if unknown:
-            _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}")
+            _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}"
+                         + (f" or {sorted(variants)}" if variants else " (AGENT@recipe needs --recipe AGENT=FILE)"))
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         _usage_error(f"--out {args.out!r} is a file, not a directory")
     if args.address is not None and args.backend != "ray":
@@ -394,7 +418,10 @@ def _benchmark(args) -> int:
             _usage_error(f"--address: {exc}")
     try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
-                         episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds)
+                         episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
+                         recipes=recipes)
+    except HyperparamsError as exc:  # a recipe file without the env's section, or unreadable
+        _usage_error(f"--recipe: {exc}")
     except ValueError as exc:
         _usage_error(str(exc))
     if args.dry_run:
@@ -403,7 +430,7 @@ def _benchmark(args) -> int:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
                              workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite,
-                             backend=args.backend, address=args.address)
+                             backend=args.backend, address=args.address, recipes=recipes)
     except OutDirError as exc:  # the directory changed since the check above
         _usage_error(f"--out {exc}")
     except ConnectionError as exc:  # --address: no Ray cluster there
@@ -420,6 +447,8 @@ def _benchmark(args) -> int:
         print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}, evaluation episodes "
               f"{summ['eval_seeds'][0]}..{summ['eval_seeds'][-1]} (the same for every policy)")
         print(table)
+    for name, r in summ["recipe_files"].items():
+        print(f"{name}: {r['label']} trained with {r['file']} (sha256 {r['sha256'][:12]}...)")
     print(f"\nwrote {args.out}/summary.json, summary.png and <env>/results.{{csv,json}}, error_norms.png, "
           f"learning_curves.png; wall time {time.perf_counter() - t0:.0f} s")
     return 0
