@@ -24,6 +24,7 @@ down. The results yielded before are the caller's to keep.
 """
 from __future__ import annotations
 
+import abc
 import logging
 import multiprocessing
 import os
@@ -58,7 +59,7 @@ def default_workers() -> int:
     return min(os.cpu_count() or 1, 8)
 
 
-class Backend:
+class Backend(abc.ABC):
     """Base class: ``with backend: for job, result in backend.run(jobs): ...``."""
 
     name = "?"
@@ -78,8 +79,9 @@ class Backend:
     def describe(self) -> str:
         return self.name
 
+    @abc.abstractmethod
     def run(self, jobs: list[Job]) -> Iterator[tuple[Job, Any]]:
-        raise NotImplementedError
+        """Run ``jobs``; yield ``(job, its return value)`` as each finishes (any order)."""
 
 
 class _LocalScratch(Backend):
