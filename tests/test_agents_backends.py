@@ -24,6 +24,7 @@ import pytest
 
 import agents
 from agents.benchmark import run_benchmark
+from proc_tree import alive as _alive, descendants as _descendants
 from dobs_envs.cli import main
 
 #: the smallest grid: two agents (centralised and shared per node), one training seed, 64 steps, one episode
@@ -200,35 +201,6 @@ def test_cluster_head_joined_with_address(serial_run, tmp_path):
         _stop_group(head)
         shutil.rmtree(temp, ignore_errors=True)
     assert ray.__version__  # (Ray itself was importable here)
-
-
-def _children(pid: int) -> set[int]:
-    kids = set()
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{task}/children") as fh:
-                kids |= {int(c) for c in fh.read().split()}
-    except FileNotFoundError:
-        pass
-    return kids
-
-
-def _descendants(pid: int) -> set[int]:
-    out, todo = set(), [pid]
-    while todo:
-        for kid in _children(todo.pop()):
-            if kid not in out:
-                out.add(kid)
-                todo.append(kid)
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().split(")")[-1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 @pytest.mark.slow

@@ -17,6 +17,7 @@ import pytest
 
 from agents.benchmark import BUDGETS
 from agents.runs import RunDirError, read_run_config, resume_point
+from proc_tree import alive as _alive, children as _children
 from agents.train import resume
 from dobs_envs.cli import main
 
@@ -269,22 +270,6 @@ def test_second_sigint_aborts_at_once(tmp_path, python_sigint_handler):
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     assert _config(out)["status"] == "running" and not os.path.exists(os.path.join(out, "model.zip"))
     assert resume_point(out).sb3_timesteps == 2 * CKPT
-
-
-def _children(pid: int) -> set[int]:
-    kids = set()
-    for task in os.listdir(f"/proc/{pid}/task"):
-        with open(f"/proc/{pid}/task/{task}/children") as fh:
-            kids |= {int(c) for c in fh.read().split()}
-    return kids
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().split(")")[-1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 def _scratch_runs(tmp: str) -> list[str]:
