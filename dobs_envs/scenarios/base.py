@@ -28,6 +28,7 @@ import numpy as np
 from ..graphs import Graph, as_graph
 from ..linalg.validation import as_array, as_float, as_int, as_symmetric
 from ..sim.state import SimParams
+from .composition import embed_block
 from .signals import Sinusoids
 
 __all__ = ["Scenario", "CONTROLLERS"]
@@ -57,17 +58,6 @@ def _sym(M: np.ndarray, name: str, definite: bool) -> np.ndarray:
 def _scalar(v, name) -> float:
     """A finite real number (bool, complex, strings, NaN/inf, beyond-float integers refused)."""
     return as_float(v, f"Scenario.{name}")
-
-
-def _embed(M: np.ndarray, offset: int, n: int, axis: int) -> np.ndarray:
-    """Place the agent block ``M`` at rows (axis 0) or columns (axis 1) ``offset:`` of an ``n``-wide zero matrix."""
-    if axis == 0:
-        out = np.zeros((n, M.shape[1]))
-        out[offset:offset + M.shape[0]] = M
-    else:
-        out = np.zeros((M.shape[0], n))
-        out[:, offset:offset + M.shape[1]] = M
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -367,11 +357,11 @@ class Scenario:
             off[:, offset:offset + ni] = 0.0
             if not (np.allclose(blk, Ai, **tol) and not np.any(off)):
                 raise ValueError(f"Scenario.mas_agents[{i}].A does not match Scenario.A: A must be diag(A_1, ..., A_N) (eq. HMAS)")
-            Ce = _embed(Ci, offset, n, axis=1)
+            Ce = embed_block(Ci, offset, n, axis=1)
             if self.C[i].shape != Ce.shape or not np.allclose(self.C[i], Ce, **tol):
                 raise ValueError(f"Scenario.C[{i}] must equal [0 C_{i} 0] of mas_agents[{i}] (eq. HMAS)")
             Bk = np.hstack([self.channels[k] for k in self.known[i]]) if self.known[i] else np.zeros((n, 0))
-            if Bk.shape != (n, Bi.shape[1]) or not np.allclose(Bk, _embed(Bi, offset, n, axis=0), **tol):
+            if Bk.shape != (n, Bi.shape[1]) or not np.allclose(Bk, embed_block(Bi, offset, n, axis=0), **tol):
                 raise ValueError(
                     f"Scenario.known[{i}] / channels: the channels known by agent {i} must stack to "
                     f"[0 B_{i}^T 0]^T of mas_agents[{i}] (eq. HMAS: agent i knows exactly its own input)"

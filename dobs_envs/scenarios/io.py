@@ -61,11 +61,11 @@ from typing import Any, Mapping
 
 import numpy as np
 import yaml
-from scipy.linalg import block_diag
 
 from ..design.gains import lyapunov_P, shifted_are_feedback
-from ..graphs import Graph, complete_graph, path_graph, random_connected_graph, ring_graph, star_graph
+from ..graphs import Graph, random_connected_graph
 from .base import Scenario
+from .composition import TOPOLOGIES, compose_mas
 from .signals import Sinusoids
 
 __all__ = [
@@ -89,7 +89,6 @@ _FIELDS = (
 #: Keys accepted at the top level of a scenario file.
 VALID_KEYS = tuple(sorted(_FIELDS + ("K_shift",)))
 _GRAPH_KEYS = ("topology", "edges", "weights", "adjacency", "n_nodes", "edge_prob", "seed")
-_TOPOLOGIES = {"ring": ring_graph, "path": path_graph, "star": star_graph, "complete": complete_graph}
 _SIGNAL_KEYS = ("amplitude", "frequency", "phase")
 _AGENT_KEYS = ("A", "B", "C")
 _SLIDING = ("sliding_mode", "adaptive_sliding_mode")
@@ -210,10 +209,10 @@ def _graph_from(spec, N: int, source: str) -> Graph:
                 return random_connected_graph(n_nodes, spec.get("edge_prob", 0.3), seed=spec["seed"])
             if "edge_prob" in spec or "seed" in spec:
                 raise ScenarioFileError(source, "graph", "'edge_prob'/'seed' only apply to 'topology: random'")
-            if topo not in _TOPOLOGIES:
+            if topo not in TOPOLOGIES:
                 raise ScenarioFileError(source, "graph.topology",
-                                        f"must be one of {sorted(_TOPOLOGIES) + ['random']}, got {topo!r}")
-            return _TOPOLOGIES[topo](n_nodes)
+                                        f"must be one of {sorted(TOPOLOGIES) + ['random']}, got {topo!r}")
+            return TOPOLOGIES[topo](n_nodes)
         if kind == "edges":
             edges = _list(spec["edges"], source, "graph.edges")
             return Graph.from_edges(n_nodes, [tuple(e) if isinstance(e, (list, tuple)) else (e,) for e in edges],
@@ -256,21 +255,6 @@ def _agents_from(spec, source) -> list:
     if not agents:
         raise ScenarioFileError(source, "mas_agents", "must list at least one agent")
     return agents
-
-
-def _compose_mas(agents):
-    """Composite ``A``, channels, ``C`` of Section AIHMAS from the agent blocks."""
-    A = block_diag(*[a for a, _, _ in agents])
-    n = A.shape[0]
-    offs = np.cumsum([0] + [a.shape[0] for a, _, _ in agents])
-    channels, C = [], []
-    for i, (Ai, Bi, Ci) in enumerate(agents):
-        if Bi.shape[0] != Ai.shape[0] or Ci.shape[1] != Ai.shape[0]:
-            raise ValueError(f"mas_agents[{i}]: B must have {Ai.shape[0]} rows and C {Ai.shape[0]} columns")
-        Bk = np.zeros((n, Bi.shape[1])); Bk[offs[i]:offs[i + 1]] = Bi
-        Ck = np.zeros((Ci.shape[0], n)); Ck[:, offs[i]:offs[i + 1]] = Ci
-        channels.append(Bk); C.append(Ck)
-    return A, channels, C
 
 
 _FLOAT_MAX = float(np.finfo(np.float64).max)
@@ -329,13 +313,12 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     agents = None
     if "mas_agents" in d:
         agents = _agents_from(d["mas_agents"], source)
-        kw["mas_agents"] = tuple(agents)
         try:
-            A_c, ch_c, C_c = _compose_mas(agents)
+            mas = compose_mas(agents)  # Section AIHMAS: the defaults of A, channels, C, known, links
         except ValueError as exc:
             raise ScenarioFileError(source, "mas_agents", str(exc)) from None
-        defaults = dict(A=A_c, channels=ch_c, C=C_c, known=[[i] for i in range(len(agents))],
-                        links=list(range(len(agents))))
+        kw["mas_agents"] = mas.mas_agents
+        defaults = mas._asdict()
     else:
         defaults = {}
     required = ["name", "graph", "x0"] + ([] if agents else ["A", "channels", "C", "known", "links"])

@@ -59,9 +59,9 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..design.gains import shifted_are_feedback
-from ..graphs import ring_graph
 from ..linalg.validation import as_float
 from .base import Scenario
+from .composition import agent_offsets, compose_mas, ring_or_path
 from .paper import ne1_agents
 
 __all__ = [
@@ -121,7 +121,7 @@ def position_indices(agents) -> np.ndarray:
         if agents.mas_agents is None:
             raise ValueError(f"scenario {agents.name!r} is not a multi-agent system (mas_agents is None)")
         agents = agents.mas_agents
-    return np.cumsum([0] + _agent_dims(agents)[:-1]).astype(int)
+    return agent_offsets(_agent_dims(agents))[:-1].astype(int)
 
 
 def _selector(agents) -> tuple[np.ndarray, int]:
@@ -180,9 +180,8 @@ def rendezvous_lqr(agents=None, *, q_rest: float = DEFAULT_Q_REST, r: float = 1.
     agents = ne1_agents() if agents is None else agents
     r, rho = as_float(r, "r", positive=True), as_float(rho, "rho", minimum=0.0)
     Q = rendezvous_cost(agents, q_rest)
-    A = sla.block_diag(*[np.atleast_2d(np.asarray(a, dtype=float)) for a, _, _ in agents])
-    B = sla.block_diag(*[np.asarray(b, dtype=float).reshape(np.atleast_2d(np.asarray(a)).shape[0], -1)
-                         for a, b, _ in agents])
+    mas = compose_mas(agents)
+    A, B = mas.A, np.hstack(mas.channels)  # B = diag(B_i)
     n, m = B.shape
     R = r * np.eye(m)
     S, _ = _selector(agents)
@@ -247,38 +246,27 @@ def rendezvous_scenario(
     """
     default_agents = agents is None
     agents = ne1_agents() if default_agents else list(agents)
-    dims = _agent_dims(agents)
-    N, n = len(agents), int(sum(dims))
+    N = len(_agent_dims(agents))  # refuses what is not a sequence of real (A_i, B_i, C_i) triples
     Q = rendezvous_cost(agents, q_rest)
     _, K = rendezvous_lqr(agents, q_rest=q_rest, r=r, rho=rho)
     m = K.shape[0]
-    A = sla.block_diag(*[np.atleast_2d(np.asarray(a, dtype=float)) for a, _, _ in agents])
-    offs = np.cumsum([0] + dims)
-    channels, C = [], []
-    for i, (Ai, Bi, Ci) in enumerate(agents):
-        Bi = np.asarray(Bi, dtype=float).reshape(dims[i], -1)
-        Ci = np.atleast_2d(np.asarray(Ci, dtype=float))
-        Bk = np.zeros((n, Bi.shape[1])); Bk[offs[i]:offs[i + 1]] = Bi
-        Ck = np.zeros((Ci.shape[0], n)); Ck[:, offs[i]:offs[i + 1]] = Ci
-        channels.append(Bk); C.append(Ck)
     if x0 is None:
         if not default_agents:
             raise ValueError("rendezvous_scenario: give x0 for custom agents (the default is NE1's)")
         x0 = np.array(_NE1_X0)
     if graph is None:
-        graph = ring_graph(N) if N >= 3 else np.ones((N, N)) - np.eye(N)
+        graph = ring_or_path(N)
     return Scenario(
         name=name,
-        A=A, channels=channels, C=C,
-        known=[(i,) for i in range(N)],
+        # A = diag(A_i), B^i = [0 B_i^T 0]^T, C_i = [0 C_i 0]; agent i knows u_i and uses xhat_i
+        **compose_mas(agents)._asdict(),
         graph=graph,
-        links=tuple(range(N)),
         x0=x0,
         K=K,
         controller="feedback",
         Q=Q, R=float(r) * np.eye(m),
         gamma0=0.1, gamma_s0=0.1, phi=0.2, phi_s=0.5,
-        mas_agents=tuple(agents), mas_shift=mas_shift,
+        mas_shift=mas_shift,
         t_end=t_end, dt=dt,
         description=("Rendezvous of heterogeneous agents (eq. HMAS): positions agree, other components "
                      "settle; u_i = K_i xhat_i with the rendezvous LQR gain"),

@@ -8,11 +8,11 @@ scenario), which is all Assumption 5 requires.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import block_diag
 
 from ..design.gains import lyapunov_P, shifted_are_feedback
 from ..graphs import ring_graph
 from .base import Scenario
+from .composition import compose_mas
 from .signals import Sinusoids
 
 __all__ = ["ne1", "ne2", "ne2_ablation", "ne3", "ne2_plant", "ne1_agents", "PAPER_SCENARIOS"]
@@ -143,26 +143,16 @@ def ne1(*, t_end: float = 30.0, dt: float = 1e-3) -> Scenario:
     ``phi_i = 0.2``, ``phi_is = 0.5``. O-O graph: ring 1-2-3-4-5-1 (unit weights;
     Fig. MASGraph is missing from the source).
     """
-    agents = ne1_agents()
-    A = block_diag(*[a for a, _, _ in agents])
-    n = A.shape[0]
-    offsets = np.cumsum([0] + [a.shape[0] for a, _, _ in agents])
-    channels, C = [], []
-    for i, (Ai, Bi, Ci) in enumerate(agents):
-        Bk = np.zeros((n, Bi.shape[1])); Bk[offsets[i]:offsets[i + 1]] = Bi
-        Ck = np.zeros((Ci.shape[0], n)); Ck[:, offsets[i]:offsets[i + 1]] = Ci
-        channels.append(Bk); C.append(Ck)
     return Scenario(
         name="ne1",
-        A=A, channels=channels, C=C,
-        known=[(i,) for i in range(5)],
+        # A = diag(A_i), B^i = [0 B_i^T 0]^T, C_i = [0 C_i 0]; agent i knows u_i and uses xhat_i
+        **compose_mas(ne1_agents())._asdict(),
         graph=ring_graph(5),
-        links=tuple(range(5)),
         x0=[-1, -2, -3, -4, 5, 4, 3, 2, 1],
         prescribed_input=Sinusoids(amplitude=[0.5 * i for i in range(5)], frequency=[5, 4, 3, 2, 1], phase=0.0),
         controller="open_loop",
         gamma0=0.1, gamma_s0=0.1, phi=0.2, phi_s=0.5,
-        mas_agents=tuple(agents), mas_shift=0.2,
+        mas_shift=0.2,
         t_end=t_end, dt=dt,
         description=ne1.__doc__.split("\n\n")[0],
     )

@@ -56,10 +56,11 @@ from scipy.linalg import block_diag
 
 from .. import assumptions as _asm
 from ..design.gains import lyapunov_P, shifted_are_feedback
-from ..graphs import Graph, as_graph, complete_graph, path_graph, random_connected_graph, ring_graph, star_graph
+from ..graphs import Graph, as_graph, random_connected_graph
 from ..linalg.subspaces import is_hurwitz
 from ..linalg.validation import as_flag, as_float, as_int, check_seed
 from .base import CONTROLLERS, Scenario
+from .composition import TOPOLOGIES, compose_mas, ring_or_path
 from .signals import Sinusoids
 
 __all__ = [
@@ -71,8 +72,8 @@ __all__ = [
     "GRAPH_TOPOLOGIES",
 ]
 
-#: Named O-O topologies accepted by the ``graph`` argument.
-GRAPH_TOPOLOGIES = ("random", "ring", "path", "star", "complete")
+#: Named O-O topologies accepted by the ``graph`` argument (``"ring"`` is a path below 3 nodes).
+GRAPH_TOPOLOGIES = ("random",) + tuple(TOPOLOGIES)
 
 #: Adaptive-law constants of NE3 (used by default with the sliding-mode controllers).
 _NE3_CONSTANTS = dict(gamma0=0.1, sigma=0.2, phi=5.0, gamma_s0=0.1, sigma_s=0.1, phi_s=10.0,
@@ -181,8 +182,8 @@ def _make_graph(graph, N: int, edge_prob: float, rng: np.random.Generator) -> Gr
         if graph == "random":
             return random_connected_graph(N, edge_prob, seed=int(rng.integers(2**31)))
         if graph == "ring":
-            return ring_graph(N) if N >= 3 else path_graph(N)
-        return {"path": path_graph, "star": star_graph, "complete": complete_graph}[graph](N)
+            return ring_or_path(N)
+        return TOPOLOGIES[graph](N)
     g = as_graph(graph)
     if g.n_nodes != N:
         raise ValueError(f"graph has {g.n_nodes} nodes, expected {N}")
@@ -371,19 +372,11 @@ def random_mas_scenario(
                 Ai, Bi, Ci = T.T @ Ai @ T, T.T @ Bi, Ci @ T
             agents.append((Ai, Bi, Ci))
         g = _make_graph(graph, N, edge_prob, rng)
-        A = block_diag(*[a for a, _, _ in agents])
-        n = A.shape[0]
-        offs = np.cumsum([0] + [a.shape[0] for a, _, _ in agents])
-        channels, C = [], []
-        for i, (Ai, Bi, Ci) in enumerate(agents):
-            Bk = np.zeros((n, Bi.shape[1])); Bk[offs[i]:offs[i + 1]] = Bi
-            Ck = np.zeros((Ci.shape[0], n)); Ck[:, offs[i]:offs[i + 1]] = Ci
-            channels.append(Bk); C.append(Ck)
-        base = dict(name=name, A=A, channels=channels, C=C, known=[(i,) for i in range(N)], graph=g,
-                    links=tuple(range(N)), mas_agents=tuple(agents), mas_shift=mas_shift,
+        mas = compose_mas(agents)
+        base = dict(name=name, **mas._asdict(), graph=g, mas_shift=mas_shift,
                     description=f"Random heterogeneous MAS (eq. HMAS), {N} agents, seed {seed}",
                     metadata=dict(meta, attempt=attempt))
-        sc = _finish(rng, controller=controller, A=A, B=np.hstack(channels), shift=shift,
+        sc = _finish(rng, controller=controller, A=mas.A, B=np.hstack(mas.channels), shift=shift,
                      x0_scale=x0_scale, base=base, overrides=overrides)
         if verify:
             _verify(sc)
