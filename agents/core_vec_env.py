@@ -22,7 +22,7 @@ over the Gymnasium env):
 - **Infos**: every slot's info (and ``reset_infos``) has the same keys from ``reset`` on:
   ``"TimeLimit.truncated"`` (True only for a truncation, ``max_cycles``, never for a
   termination) and the integer ``"termination_reason"`` (codes of
-  :data:`dobs_envs.envs.core.REASONS`: 0 none, 1 state_bound_exceeded, 2 non_finite_state,
+  :data:`dobs_envs.envs.env_core.REASONS`: 0 none, 1 state_bound_exceeded, 2 non_finite_state,
   3 horizon); plus ``"terminal_observation"`` on the slots of a finished copy (SB3's
   convention). ``diagnostics=True`` adds the per-step errors the PettingZoo / Gymnasium
   infos carry: per agent ``estimation_error``, ``tracking_error``, ``gamma``, ``gamma_s``

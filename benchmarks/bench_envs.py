@@ -144,7 +144,7 @@ def main(argv=None):
 
     from dobs_envs.envs.features import flops_per_row
     from dobs_envs.registry import ENVIRONMENTS
-    from dobs_envs.sim.kernel import flops_per_period
+    from dobs_envs.sim.period_kernel import flops_per_period
 
     # ---------------------------------------------------------------- contestants
     rng = np.random.default_rng(0)

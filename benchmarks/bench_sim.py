@@ -16,7 +16,7 @@ import numpy as np
 
 from dobs_envs.scenarios.paper import ne2
 from dobs_envs.sim import step_env
-from dobs_envs.sim.kernel import control_period_compiled
+from dobs_envs.sim.period_kernel import control_period_compiled
 
 
 def best_of(fn, inner: int, repeats: int = 15) -> float:

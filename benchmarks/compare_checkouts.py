@@ -52,7 +52,10 @@ def digest():
     from dobs_envs.rollout import rollout
     from dobs_envs.scenarios.paper import PAPER_SCENARIOS, ne3
     from dobs_envs.sim import SimParams, step_env
-    from dobs_envs.sim.kernel import TILE
+    try:
+        from dobs_envs.sim.period_kernel import TILE
+    except ImportError:  # a checkout before issue 23 named the module sim.kernel
+        from dobs_envs.sim.kernel import TILE
     out = {}
 
     def run_core(core, seeds, steps=20, gain=1.5, seed=0, options=None):
@@ -225,7 +228,10 @@ def speed_setup(env_id, batch, clock="wall"):
             v.step(vacts[k % 8])
         return n * batch / (now() - t0)
     from dobs_envs.scenarios.paper import ne2
-    from dobs_envs.sim.kernel import control_period_compiled
+    try:
+        from dobs_envs.sim.period_kernel import control_period_compiled
+    except ImportError:  # a checkout before issue 23 named the module sim.kernel
+        from dobs_envs.sim.kernel import control_period_compiled
     params = ne2().sim_params(substeps=50)
     sims = {}
     for B in (1, batch):

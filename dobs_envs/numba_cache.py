@@ -2,8 +2,8 @@
 
 numba keys a cached function on its *own* source file only (its modification time and size),
 but the cached machine code of a kernel also holds the callees it inlined from other modules:
-``envs.step_kernel.advance_range`` holds ``sim.kernel.advance_rows``. After an edit of
-``sim/kernel.py`` alone, the cached ``advance_range`` would go on running the old kernel, with
+``envs.step_kernel.advance_range`` holds ``sim.period_kernel.advance_rows``. After an edit of
+``sim/period_kernel.py`` alone, the cached ``advance_range`` would go on running the old kernel, with
 no error (seen in a development checkout on 2026-12-02: the tests passed on the stale code).
 
 :func:`ensure_fresh` fingerprints the sources of every module with cached kernels
@@ -27,8 +27,8 @@ __all__ = ["KERNEL_MODULES", "ensure_fresh", "fingerprint", "cache_dir"]
 #: others), then the declarations of the kernels' arguments (``sim/kernel_args.py``) and the generator
 #: of their compiled unpacking (``packing.py``): numba caches that generated code under the kernel
 #: module's file, which does not change when a declaration does
-KERNEL_MODULES = ("sim/kernel.py", "envs/step_kernel.py", "envs/features.py", "control/kernel.py", "rollout.py",
-                  "sim/kernel_args.py", "packing.py")
+KERNEL_MODULES = ("sim/period_kernel.py", "envs/step_kernel.py", "envs/features.py", "control/law_kernel.py",
+                  "rollout.py", "sim/kernel_args.py", "packing.py")
 
 #: name of the file, in a module's cache directory, that records the fingerprint its cache was built from
 STAMP = "dobs_envs_kernels.fingerprint"

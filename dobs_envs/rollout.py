@@ -4,8 +4,8 @@
 controller applied at every Euler step (control period = ``dt``: the continuous-time laws
 up to the O(dt) of the scheme), entirely in compiled code: per step the estimates
 ``xhat_i = z_i + Gbar_i C_i x`` (eq. hatxieq), the control law
-(:func:`dobs_envs.control.kernel.law_copy`) and one Euler step of plant, observers,
-adaptive gains, reference model and exosystem (:func:`dobs_envs.sim.kernel.advance_rows`).
+(:func:`dobs_envs.control.law_kernel.law_copy`) and one Euler step of plant, observers,
+adaptive gains, reference model and exosystem (:func:`dobs_envs.sim.period_kernel.advance_rows`).
 Copies may differ in the controller's boundary layer ``epsilon`` and adaptation gain
 ``phi_beta`` (eqs. hepsfunc, adlawbeta), which is what the Theorem 6 study sweeps.
 
@@ -26,10 +26,10 @@ import numba
 import numpy as np
 
 from .control import paper_policy
-from .control.kernel import law_arrays, law_copy
+from .control.law_kernel import law_arrays, law_copy
 from .numba_cache import ensure_fresh
 from .sim import estimates, step_env
-from .sim.kernel import advance_rows, unpack_kernel_args
+from .sim.period_kernel import advance_rows, unpack_kernel_args
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -118,7 +118,7 @@ class Recording(NamedTuple):
 @numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
     """Run ``loop.steps`` Euler steps of every copy in place (state ``x .. x_r``, controller gains
-    ``beta (B, Nc)``), the law :class:`~dobs_envs.control.kernel.LawArrays` ``law`` applied at
+    ``beta (B, Nc)``), the law :class:`~dobs_envs.control.law_kernel.LawArrays` ``law`` applied at
     every step, recording into :class:`Recording` ``rec`` every ``loop.stride`` steps."""
     ka = unpack_kernel_args(KF, KI)
     C, G_bar = ka.C, ka.G_bar

@@ -5,9 +5,9 @@ import numpy as np
 
 from baselines.references import DecentralizedPolicy, OraclePolicy, ZeroInputPolicy
 from dobs_envs.design.gains import shifted_are_feedback
-from dobs_envs.envs.base import make_parallel_env
+from dobs_envs.envs.parallel_env import make_parallel_env
 from dobs_envs.graphs import path_graph
-from dobs_envs.scenarios.base import Scenario
+from dobs_envs.scenarios.scenario import Scenario
 
 
 def double_integrator(C0):

@@ -55,7 +55,7 @@ from dobs_envs.design.observer import design_distributed_observer
 from dobs_envs.graphs import (Graph, complete_graph, path_graph, random_connected_graph, ring_graph,
                               star_graph)
 from dobs_envs.scenarios import load_scenario
-from dobs_envs.scenarios.base import Scenario
+from dobs_envs.scenarios.scenario import Scenario
 from dobs_envs.scenarios.io import ScenarioFileError, example_path, scenario_from_dict, scenario_to_dict
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=25, database=None,

@@ -5,7 +5,7 @@ conditionally stable: the gains grow with the squared consensus error, and befor
 state of norm ~100 (disturbance_rejection) to ~600 (tracking) made the observers overflow within one
 control step, an episode then ending as ``non_finite_state`` although the plant was inside the
 bound. The kernels now shorten an Euler step whose stability test fails
-(:mod:`dobs_envs.sim.kernel`, "Stable steps"). Here:
+(:mod:`dobs_envs.sim.period_kernel`, "Stable steps"). Here:
 
 - property tests (hypothesis, derandomized) on every env: initial states of any direction and norm
   inside ``state_bound``, inputs inside the action bounds (uniform, bang-bang or zero): observations,
@@ -27,7 +27,7 @@ from dobs_envs.envs import REASONS, DisturbanceRejectionEnv, TrackingEnv
 from dobs_envs.envs.numpy_advance import advance_reference
 from dobs_envs.envs.step_kernel import advance_batch
 from dobs_envs.scenarios.paper import ne3
-from dobs_envs.sim.kernel import MIN_TILE, TILE
+from dobs_envs.sim.period_kernel import MIN_TILE, TILE
 
 MODULES = {"tracking": tracking_v0, "disturbance_rejection": disturbance_rejection_v0,
            "hetero_mas": hetero_mas_v0, "random_network": random_network_v0}

@@ -1,4 +1,4 @@
-"""The batched environment core (dobs_envs.envs.core.EnvCore): API, batch independence,
+"""The batched environment core (dobs_envs.envs.env_core.EnvCore): API, batch independence,
 the compiled step against its numpy reference, reason codes, padded observations."""
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from dobs_envs.envs import DisturbanceRejectionEnv, RandomNetworkEnv, TrackingEn
 from dobs_envs.envs.numpy_advance import advance_reference
 from dobs_envs.envs.step_kernel import advance_batch
 from dobs_envs.scenarios.paper import ne2, ne3
-from dobs_envs.sim.kernel import MIN_TILE, TILE
+from dobs_envs.sim.period_kernel import MIN_TILE, TILE
 
 
 def _episode_arrays(core, seeds, steps, rng_seed=0):

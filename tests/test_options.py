@@ -10,7 +10,7 @@ import pytest
 import dobs_envs  # noqa: F401
 from dobs_envs import registry, tracking_v0
 from dobs_envs.envs import EnvOptions, HeteroMASOptions, RandomNetworkOptions
-from dobs_envs.envs.base import COMMON_OPTIONS
+from dobs_envs.envs.parallel_env import COMMON_OPTIONS
 
 CLASSES = [registry.get(name).load_class() for name in registry.ENVIRONMENTS]
 

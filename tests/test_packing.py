@@ -108,7 +108,7 @@ def _random_params(seed=0, N=4, n=5, p=2, m=3, mv=2):
 
 
 def test_kernel_args_unpack_in_python_and_compiled_code_equal_the_declared_values():
-    from dobs_envs.sim.kernel import unpack_kernel_args as compiled
+    from dobs_envs.sim.period_kernel import unpack_kernel_args as compiled
 
     prm = _random_params()
     ka = prm.kernel_args

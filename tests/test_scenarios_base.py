@@ -1,4 +1,4 @@
-"""Scenario (base.py): validation errors name the field, replace/equals, MAS consistency, x0 sampling."""
+"""Scenario (scenarios/scenario.py): validation errors name the field, replace/equals, MAS consistency, x0 sampling."""
 import numpy as np
 import pytest
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dobs_envs.sim import SimParams, estimates, step_env
-from dobs_envs.sim.kernel import HAVE_NUMBA
+from dobs_envs.sim.period_kernel import HAVE_NUMBA
 
 
 def _random_design(rng, N=4, n=5, p=2, m=3, mv=2):

@@ -14,7 +14,7 @@ from gymnasium.vector.vector_env import AutoresetMode
 import dobs_envs
 from dobs_envs import disturbance_rejection_v0, tracking_v0
 from dobs_envs.envs import DObsVectorEnv
-from dobs_envs.sim.kernel import MIN_TILE
+from dobs_envs.sim.period_kernel import MIN_TILE
 
 IDS = list(dobs_envs.GYM_IDS)
 

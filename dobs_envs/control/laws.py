@@ -23,7 +23,7 @@ stable for any ``T``.
 This module is part of the library (the environments calibrate their action
 bounds with it, ``dobs-envs reproduce`` simulates with it); :mod:`baselines.paper`
 re-exports it and :mod:`baselines.policies` wraps it as env-API policies.
-Scenarios are duck-typed (any object with the :class:`~dobs_envs.scenarios.base.Scenario`
+Scenarios are duck-typed (any object with the :class:`~dobs_envs.scenarios.scenario.Scenario`
 fields used here), so this module imports nothing from the rest of the package.
 """
 from __future__ import annotations

@@ -10,9 +10,9 @@
   (``gym.make_vec("dobs_envs/Tracking-v0", num_envs=B)``);
 - :class:`EnvCore`: the batched core all of them drive; :class:`EnvOptions`: the options.
 """
-from .base import COMMON_OPTIONS, DObsParallelEnv, make_parallel_env
+from .parallel_env import COMMON_OPTIONS, DObsParallelEnv, make_parallel_env
 from .centralized import CentralizedEnv, make_gym_env
-from .core import REASONS, EnvCore, StepResult
+from .env_core import REASONS, EnvCore, StepResult
 from .disturbance import DisturbanceRejectionEnv
 from .hetero_mas import HeteroMASEnv
 from .random_network import RandomNetworkEnv

@@ -1,6 +1,6 @@
 """The one layer between the batched core and its front ends: spaces, observations, infos and actions.
 
-An :class:`~dobs_envs.envs.core.EnvCore` writes its outputs into batch-first buffers
+An :class:`~dobs_envs.envs.env_core.EnvCore` writes its outputs into batch-first buffers
 (``observations (B, K, D)``, ``estimation_errors (B, N)``, ...). The four front ends hand them
 out in their own conventions; every conversion is written once here, in :class:`CoreAdapter`:
 
@@ -185,7 +185,7 @@ class CoreAdapter:
 
     def agent_inputs(self, actions, out: np.ndarray | None = None) -> np.ndarray:
         """Inputs ``(B, m)`` from the agents' actions concatenated in agent order
-        (:meth:`EnvCore.agent_inputs <dobs_envs.envs.core.EnvCore.agent_inputs>`)."""
+        (:meth:`EnvCore.agent_inputs <dobs_envs.envs.env_core.EnvCore.agent_inputs>`)."""
         return self.core.agent_inputs(actions, out=out)
 
     def write_agent_actions(self, actions, out: np.ndarray) -> None:

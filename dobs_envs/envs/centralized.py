@@ -1,7 +1,7 @@
 """Gymnasium view of the environments: one centralised agent (a thin adapter).
 
-:class:`CentralizedEnv` wraps a :class:`~dobs_envs.envs.base.DObsParallelEnv` and
-drives its batch-size-1 :class:`~dobs_envs.envs.core.EnvCore` directly (no per-step
+:class:`CentralizedEnv` wraps a :class:`~dobs_envs.envs.parallel_env.DObsParallelEnv` and
+drives its batch-size-1 :class:`~dobs_envs.envs.env_core.EnvCore` directly (no per-step
 dict round trip); the parallel env's diagnostics (``state()``, ``estimation_errors()``,
 ``task_error()``, ``sim_state``, ``applied_input``) follow the Gymnasium episode:
 
@@ -20,7 +20,7 @@ dict round trip); the parallel env's diagnostics (``state()``, ``estimation_erro
 - reward: the team reward; ``terminated`` as the parallel env; info (the same keys from
   ``reset`` on, numeric only): ``tracking_error``, ``estimation_errors`` (N,), ``gamma`` (N,),
   ``gamma_s`` (N,), the task error if the task has one (e.g. ``disagreement``) and the integer
-  ``termination_reason`` (codes of :data:`~dobs_envs.envs.core.REASONS`: 0 none,
+  ``termination_reason`` (codes of :data:`~dobs_envs.envs.env_core.REASONS`: 0 none,
   1 state_bound_exceeded, 2 non_finite_state, 3 horizon; ``gym.make``'s ``TimeLimit``
   truncates with code 0).
 
@@ -54,7 +54,7 @@ import numpy as np
 from ..linalg.validation import as_numeric, check_seed
 from ..registry import ENVIRONMENTS, GYM_IDS, EnvEntry
 from .adapter import CoreAdapter, central_spaces
-from .base import DObsParallelEnv
+from .parallel_env import DObsParallelEnv
 
 __all__ = ["CentralizedEnv", "make_gym_env", "GYM_IDS", "central_spaces", "reject_horizon_options"] + [f"make_{name}" for name in ENVIRONMENTS]
 
@@ -136,7 +136,7 @@ class CentralizedEnv(gym.Env):
 
 def make_gym_env(scenario, **options) -> CentralizedEnv:
     """Centralised Gymnasium env for any Scenario (or YAML/JSON path); options as
-    :func:`~dobs_envs.envs.base.make_parallel_env` (truncation by ``max_cycles``/``horizon``, no TimeLimit)."""
+    :func:`~dobs_envs.envs.parallel_env.make_parallel_env` (truncation by ``max_cycles``/``horizon``, no TimeLimit)."""
     return CentralizedEnv(DObsParallelEnv(scenario=scenario, **options))
 
 

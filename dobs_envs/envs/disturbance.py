@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import DObsParallelEnv
+from .parallel_env import DObsParallelEnv
 from .options import RENDER_MODES
 
 __all__ = ["DisturbanceRejectionEnv", "NE3_ACTION_BOUND"]

@@ -40,7 +40,7 @@ class EnvOptions:
     Attributes
     ----------
     scenario : Scenario, str or path, optional
-        The system (a :class:`~dobs_envs.scenarios.base.Scenario` or a YAML/JSON file);
+        The system (a :class:`~dobs_envs.scenarios.scenario.Scenario` or a YAML/JSON file);
         ``None``: the environment's default.
     dt : float
         Euler step (s) of the simulation.

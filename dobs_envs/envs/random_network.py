@@ -1,7 +1,7 @@
 """``random_network_v0``: a seeded random system from :mod:`dobs_envs.scenarios.random`."""
 from __future__ import annotations
 
-from .base import DObsParallelEnv
+from .parallel_env import DObsParallelEnv
 from .options import RENDER_MODES, RandomNetworkOptions
 
 __all__ = ["RandomNetworkEnv"]

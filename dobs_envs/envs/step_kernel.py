@@ -5,7 +5,7 @@ which threads may run concurrently on disjoint ranges: it releases the GIL):
 
 1. clip the input ``u[b]`` to ``[u_lo, u_hi]`` into the copy's work row (the applied input);
 2. with the "random" disturbance, set ``v[b] = sum_l a sin(w t + phi)`` at the period's start (held);
-3. simulate one control period (:func:`dobs_envs.sim.kernel.advance_rows`: SIMD tiles across
+3. simulate one control period (:func:`dobs_envs.sim.period_kernel.advance_rows`: SIMD tiles across
    copies) with the held input and the held reference command ``r^k(t)`` of eq. (refxdy) (the
    ``r`` block of the copy's feature vector, written at ``t`` by the previous step or reset);
 4. ``t += T``, ``cycles += 1``; features, observations and the stage cost
@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..numba_cache import ensure_fresh
-from ..sim.kernel import advance_rows, unpack_kernel_args
+from ..sim.period_kernel import advance_rows, unpack_kernel_args
 from ..sim.kernel_args import StateArrays
 from .features import features_row, unpack_static
 
@@ -50,7 +50,7 @@ REASON_NONE, REASON_STATE_BOUND, REASON_NON_FINITE, REASON_HORIZON = 0, 1, 2, 3
 
 
 class StepConsts(NamedTuple):
-    """The scalar constants of one step of a core (:class:`~dobs_envs.envs.core.EnvCore` builds them by
+    """The scalar constants of one step of a core (:class:`~dobs_envs.envs.env_core.EnvCore` builds them by
     name). The compiled step receives them as a plain tuple in this field order (``tuple(consts)``:
     a named tuple costs ~1.5 us more per compiled call to dispatch) and reads them by name
     (``c = StepConsts(*consts)``, free in compiled code)."""

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import DObsParallelEnv
+from .parallel_env import DObsParallelEnv
 from .options import RENDER_MODES
 
 __all__ = ["TrackingEnv", "NE2_ACTION_BOUND"]
@@ -87,7 +87,7 @@ class TrackingEnv(DObsParallelEnv):
     2 ``non_finite_state``; a finite ``x`` beyond the bound is always reason 1). The
     simulation stays finite from every state inside the bound (and beyond it: Euler steps
     are shortened where the adaptive gains would make them unstable,
-    :mod:`dobs_envs.sim.kernel` "Stable steps"), so reason 2 means the state was already
+    :mod:`dobs_envs.sim.period_kernel` "Stable steps"), so reason 2 means the state was already
     non-finite or absurdly large (e.g. ``state_bound=1e150`` with inputs of 1e30). The terminal step's observations and ``state()`` are
     cleaned (NaN -> 0, +-inf -> +-largest finite value of ``obs_dtype``), a non-finite
     step cost is replaced by the cost of one step on the bound, and ``info`` keeps the
@@ -105,7 +105,7 @@ class TrackingEnv(DObsParallelEnv):
     ``||xhat_i - x||`` of its linked node, ``tracking_error`` ``||x - x_r||``, that node's
     ``gamma``, ``gamma_s``, and the integer ``termination_reason``: 0 none (the episode goes
     on), 1 state_bound_exceeded, 2 non_finite_state, 3 horizon (truncated after
-    ``max_cycles``) (:data:`dobs_envs.envs.core.REASONS`).
+    ``max_cycles``) (:data:`dobs_envs.envs.env_core.REASONS`).
 
     ## Arguments
 

@@ -2,7 +2,7 @@
 
 ``gym.make_vec("dobs_envs/Tracking-v0", num_envs=1024)`` (``vectorization_mode``
 ``"vector_entry_point"``, the default for these ids) builds a :class:`DObsVectorEnv`:
-``num_envs`` copies in one :class:`~dobs_envs.envs.core.EnvCore`, advanced by one
+``num_envs`` copies in one :class:`~dobs_envs.envs.env_core.EnvCore`, advanced by one
 compiled call per step. Copy ``c`` is the centralised env of the same id
 (:class:`~dobs_envs.envs.centralized.CentralizedEnv`): same spaces, same
 observations, rewards and episodes for the same seed (tested bit for bit).
@@ -20,7 +20,7 @@ observations, rewards and episodes for the same seed (tested bit for bit).
 - **Infos** (the same keys from ``reset`` on, numeric arrays over the copies, each with its
   ``"_<key>"`` mask, all True): ``tracking_error (B,)``, ``estimation_errors (B, N)``,
   ``gamma (B, N)``, ``gamma_s (B, N)`` (and the task error, e.g. ``disagreement``), and
-  ``termination_reason (B,)`` int8 codes of :data:`~dobs_envs.envs.core.REASONS` (0 none,
+  ``termination_reason (B,)`` int8 codes of :data:`~dobs_envs.envs.env_core.REASONS` (0 none,
   1 state_bound_exceeded, 2 non_finite_state, 3 horizon; 0 for copies still running or
   just reset).
 - ``threads`` (default: one per CPU core) advance disjoint ranges of at least 128 copies
@@ -63,7 +63,7 @@ class DObsVectorEnv(VectorEnv):
 
     Parameters
     ----------
-    env_class : a :class:`~dobs_envs.envs.base.DObsParallelEnv` subclass (its options and hooks)
+    env_class : a :class:`~dobs_envs.envs.parallel_env.DObsParallelEnv` subclass (its options and hooks)
     num_envs : int
     max_episode_steps : truncation horizon in control steps (None: the class default, ``t_end``)
     threads : threads advancing disjoint ranges of copies (None: one per CPU core; 1: serial)

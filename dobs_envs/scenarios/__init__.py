@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from typing import Callable
 
-from .base import CONTROLLERS, Scenario
+from .scenario import CONTROLLERS, Scenario
 from .io import (
     EXAMPLES,
     ScenarioFileError,

@@ -1,6 +1,6 @@
 r"""Scenario files: YAML (``.yaml``/``.yml``) and JSON (``.json``).
 
-A file is one mapping whose keys are the :class:`~dobs_envs.scenarios.base.Scenario`
+A file is one mapping whose keys are the :class:`~dobs_envs.scenarios.scenario.Scenario`
 fields, written for humans (0-based node and channel indices throughout):
 
 =====================  =====================================================================
@@ -64,7 +64,7 @@ import yaml
 
 from ..design.gains import lyapunov_P, shifted_are_feedback
 from ..graphs import Graph, random_connected_graph
-from .base import Scenario
+from .scenario import Scenario
 from .composition import TOPOLOGIES, compose_mas
 from .signals import Sinusoids
 

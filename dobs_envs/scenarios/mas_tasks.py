@@ -60,7 +60,7 @@ import scipy.linalg as sla
 
 from ..design.gains import shifted_are_feedback
 from ..linalg.validation import as_float
-from .base import Scenario
+from .scenario import Scenario
 from .composition import agent_offsets, compose_mas, ring_or_path
 from .paper import ne1_agents
 

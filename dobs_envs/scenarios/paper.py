@@ -11,7 +11,7 @@ import numpy as np
 
 from ..design.gains import lyapunov_P, shifted_are_feedback
 from ..graphs import ring_graph
-from .base import Scenario
+from .scenario import Scenario
 from .composition import compose_mas
 from .signals import Sinusoids
 

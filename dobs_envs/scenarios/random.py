@@ -59,7 +59,7 @@ from ..design.gains import lyapunov_P, shifted_are_feedback
 from ..graphs import Graph, as_graph, random_connected_graph
 from ..linalg.subspaces import is_hurwitz
 from ..linalg.validation import as_flag, as_float, as_int, check_seed
-from .base import CONTROLLERS, Scenario
+from .scenario import CONTROLLERS, Scenario
 from .composition import TOPOLOGIES, compose_mas, ring_or_path
 from .signals import Sinusoids
 
@@ -312,7 +312,7 @@ def random_mas_scenario(
         :func:`~dobs_envs.graphs.random_connected_graph` with ``edge_prob`` and a
         seed drawn from the stream) or an explicit graph (unit weights otherwise).
     controller : str
-        One of :data:`~dobs_envs.scenarios.base.CONTROLLERS`; sliding modes get
+        One of :data:`~dobs_envs.scenarios.scenario.CONTROLLERS`; sliding modes get
         ``P`` from ``(A + BK)^T P + P (A + BK) = -I`` and NE3's adaptive-law
         constants, ``"tracking"``/``"open_loop"`` random sinusoids.
     shift : float

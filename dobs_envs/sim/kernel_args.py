@@ -9,7 +9,7 @@ the kernel's parameters: each field is named, typed and shaped once here
   (:func:`kernel_args_of`; ``rows`` from :data:`ROW_MATRICES`);
 - :func:`pack_kernel_args` packs it into the two buffers passed from Python
   (``SimParams.kernel_packed``), :func:`unpack_kernel_args` unpacks them in Python (the numpy
-  references) and :func:`dobs_envs.sim.kernel.unpack_kernel_args` in compiled code (generated);
+  references) and :func:`dobs_envs.sim.period_kernel.unpack_kernel_args` in compiled code (generated);
 - the kernels read fields by name: ``ka.dt``, ``ka.rows.E_bar``.
 
 Adding a parameter: one line in :class:`KernelArgs` (name, kind, shape), a
@@ -154,5 +154,5 @@ def pack_kernel_args(ka: KernelArgs) -> tuple:
 
 def unpack_kernel_args(KF, KI) -> KernelArgs:
     """The :class:`KernelArgs` packed by :func:`pack_kernel_args`, in Python (views; ``proj_range``
-    as bool). Compiled code: :func:`dobs_envs.sim.kernel.unpack_kernel_args`."""
+    as bool). Compiled code: :func:`dobs_envs.sim.period_kernel.unpack_kernel_args`."""
     return unpack(KernelArgs, KF, KI)

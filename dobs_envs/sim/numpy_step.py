@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernel import MAX_SPLIT
+from .period_kernel import MAX_SPLIT
 
 __all__ = ["control_period_numpy"]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linalg.validation import as_array
-from .kernel import HAVE_NUMBA, control_period_compiled
+from .period_kernel import HAVE_NUMBA, control_period_compiled
 from .numpy_step import control_period_numpy
 from .state import SimParams, SimState
 

@@ -1,22 +1,22 @@
-"""What a named environment is, independently of its API: :class:`EnvSpec` (class-level hooks).
+"""What a named environment is, independently of its API: :class:`TaskSpec` (class-level hooks).
 
 An environment class (``TrackingEnv``, ...) fixes its options dataclass, the default
 scenario, the checks a user scenario must pass, the default action bounds and the task
-error; :meth:`EnvSpec.make_core` turns keyword options into a batched
-:class:`~dobs_envs.envs.core.EnvCore` of ``B`` copies. Every adapter -- PettingZoo
-(:class:`~dobs_envs.envs.base.DObsParallelEnv`, which is an ``EnvSpec``), Gymnasium single
+error; :meth:`TaskSpec.make_core` turns keyword options into a batched
+:class:`~dobs_envs.envs.env_core.EnvCore` of ``B`` copies. Every adapter -- PettingZoo
+(:class:`~dobs_envs.envs.parallel_env.DObsParallelEnv`, which is a ``TaskSpec``), Gymnasium single
 and vector envs, the SB3 ``VecEnv`` -- builds its core this way, so the named environments
 are defined once.
 """
 from __future__ import annotations
 
-from .core import EnvCore, load_scenario
+from .env_core import EnvCore, resolve_scenario
 from .options import EnvOptions
 
-__all__ = ["EnvSpec"]
+__all__ = ["TaskSpec"]
 
 
-class EnvSpec:
+class TaskSpec:
     """Class-level description of an environment (subclass hooks; see module docstring)."""
 
     #: the options dataclass of the class (its fields are the keyword arguments)
@@ -58,13 +58,13 @@ class EnvSpec:
     @classmethod
     def make_core(cls, num_envs: int = 1, *, threads: int | None = 1, **kwargs) -> EnvCore:
         """The batched core of ``num_envs`` copies of this environment with options ``kwargs``
-        (``threads``: see :class:`~dobs_envs.envs.core.EnvCore`)."""
+        (``threads``: see :class:`~dobs_envs.envs.env_core.EnvCore`)."""
         opts = cls.Options.from_kwargs(cls.__name__, kwargs, reject=cls.REJECT_OPTIONS)
         given = frozenset(kwargs)
-        sc = load_scenario(opts.scenario)
+        sc = resolve_scenario(opts.scenario)
         if sc is None:
             sc = cls._default_scenario(opts)
-        from ..scenarios.base import Scenario
+        from ..scenarios.scenario import Scenario
 
         if not isinstance(sc, Scenario):
             raise TypeError(f"scenario must be a Scenario or a path to a YAML/JSON scenario file, got {type(sc).__name__}")

@@ -1,7 +1,7 @@
 """The batched environment core: ``B`` copies of one scenario advanced together.
 
 Every adapter -- the PettingZoo ``ParallelEnv`` and its AEC form
-(:mod:`dobs_envs.envs.base`), the centralised Gymnasium ``Env``
+(:mod:`dobs_envs.envs.parallel_env`), the centralised Gymnasium ``Env``
 (:mod:`dobs_envs.envs.centralized`), the Gymnasium ``VectorEnv``
 (:mod:`dobs_envs.envs.vector`) and the SB3 ``VecEnv`` (``agents.core_vec_env``) -- drives an
 :class:`EnvCore` through this public API only.
@@ -65,7 +65,7 @@ from .distributions import N_RANDOM_TERMS, ResetDistribution
 from .features import pack_static, write_features
 from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions
-from ..sim.kernel import TILE
+from ..sim.period_kernel import TILE
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
                           advance_batch, advance_range, first_non_finite)
 
@@ -73,7 +73,7 @@ from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON
 #: reward shape -> code passed to the compiled step (0 quadratic, 1 log, 2 sqrt)
 REWARD_CODES = {"quadratic": 0, "log": 1, "sqrt": 2}
 
-__all__ = ["EnvCore", "StepResult", "REASONS", "load_scenario"]
+__all__ = ["EnvCore", "StepResult", "REASONS", "resolve_scenario"]
 
 #: reason code (the integer ``info["termination_reason"]`` of every adapter) -> name
 REASONS = {REASON_NONE: "none", REASON_STATE_BOUND: "state_bound_exceeded", REASON_NON_FINITE: "non_finite_state",
@@ -89,12 +89,13 @@ class StepResult(NamedTuple):
     reason: np.ndarray  # int8, see REASONS
 
 
-def load_scenario(sc):
-    """A Scenario, or the Scenario of a YAML/JSON file path."""
+def resolve_scenario(sc):
+    """The ``scenario`` option as given (a Scenario, or None), or the Scenario read from a YAML/JSON file path
+    (:func:`dobs_envs.scenarios.io.load_scenario`)."""
     if isinstance(sc, (str, os.PathLike)):
-        from ..scenarios.io import load_scenario as _load
+        from ..scenarios.io import load_scenario
 
-        return _load(sc)
+        return load_scenario(sc)
     return sc
 
 
@@ -125,7 +126,7 @@ class EnvCore:
         or ``"auto"``; None: ``"auto"``)
     task_error : optional ``x (B, n) -> (B,)`` task error (default: the tracking error)
     task_error_key : info key of ``task_error`` (e.g. ``"disagreement"``)
-    threads : threads advancing disjoint ranges of at least :data:`~dobs_envs.sim.kernel.TILE` copies
+    threads : threads advancing disjoint ranges of at least :data:`~dobs_envs.sim.period_kernel.TILE` copies
         concurrently (the compiled step releases the GIL); None: one per CPU core, 1: serial.
         Results do not depend on it (every copy's arithmetic is independent of the chunking).
 
@@ -136,9 +137,9 @@ class EnvCore:
 
     def __init__(self, scenario, options: EnvOptions, num_envs: int = 1, *, default_action_bound=None,
                  task_error: Callable | None = None, task_error_key: str | None = None, threads: int | None = 1):
-        from ..scenarios.base import Scenario
+        from ..scenarios.scenario import Scenario
 
-        sc = load_scenario(scenario)
+        sc = resolve_scenario(scenario)
         if not isinstance(sc, Scenario):
             raise TypeError(f"scenario must be a Scenario or a path to a YAML/JSON scenario file, "
                             f"got {type(sc).__name__}")

@@ -1,7 +1,7 @@
 """The shared PettingZoo ``ParallelEnv`` of the suite: :class:`DObsParallelEnv` (a thin adapter).
 
-One environment = a batch-size-1 :class:`~dobs_envs.envs.core.EnvCore` of one
-:class:`~dobs_envs.scenarios.base.Scenario`. The agents are the paper's *controller
+One environment = a batch-size-1 :class:`~dobs_envs.envs.env_core.EnvCore` of one
+:class:`~dobs_envs.scenarios.scenario.Scenario`. The agents are the paper's *controller
 nodes* (Fig. ofdobc): agent ``"controller_k"`` chooses the input ``u^k`` of channel
 ``B^k`` (eq. Busplit) from what its linked observer node ``i = links[k]`` knows (see
 :mod:`dobs_envs.envs.observation`); the observer nodes run the paper's distributed
@@ -9,7 +9,7 @@ observer (eqs. obidynamic, barEFGB, H_idefine, gammaiis / gagasbeta) inside the 
 
 The named environments (:mod:`dobs_envs.tracking_v0`, ...) are subclasses that fix the
 options dataclass, the default scenario, the action bounds and the task error
-(class-level hooks of :class:`~dobs_envs.envs.spec.EnvSpec`, read by ``make_core``, which
+(class-level hooks of :class:`~dobs_envs.envs.task_spec.TaskSpec`, read by ``make_core``, which
 every adapter uses); the class docstrings are their specifications. :func:`make_parallel_env` builds the
 same environment from any user :class:`Scenario` (or a YAML/JSON file).
 """
@@ -24,7 +24,7 @@ from .adapter import CoreAdapter, agent_spaces
 from .distributions import DEFAULT_INIT_NOISE
 from .options import RENDER_MODES, EnvOptions
 from .rendering import LivePlot
-from .spec import EnvSpec
+from .task_spec import TaskSpec
 
 __all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS", "agent_spaces"]
 
@@ -39,13 +39,13 @@ _CORE_ATTRS = frozenset({
     "init_noise", "penalty_cycles"})
 
 
-class DObsParallelEnv(EnvSpec, ParallelEnv):
+class DObsParallelEnv(TaskSpec, ParallelEnv):
     """Distributed observer-based control of a linear plant (generic PettingZoo ParallelEnv).
 
-    Built from any :class:`~dobs_envs.scenarios.base.Scenario`; the named environments
+    Built from any :class:`~dobs_envs.scenarios.scenario.Scenario`; the named environments
     document the paper-specific defaults. The options are the fields of
     :class:`~dobs_envs.envs.options.EnvOptions` (see :func:`make_parallel_env`); the
-    class-level task hooks and :meth:`make_core` come from :class:`~dobs_envs.envs.spec.EnvSpec`.
+    class-level task hooks and :meth:`make_core` come from :class:`~dobs_envs.envs.task_spec.TaskSpec`.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "dobs_envs_v0", "is_parallelizable": True,
