@@ -25,7 +25,8 @@ benchmark's learning-curve code), mean over the training runs. The learning curv
 candidates at equal env steps.
 
     python benchmarks/offpolicy_throughput.py [--env tracking] [--steps 2000] [--warmup 500] [--repeats 2]
-        [--n-envs 8] [--gradient-steps 2] [--train-freq 1] [--only sac,crossq] [--xla-threads 1] [--curve 50000 --seeds 3]
+        [--n-envs 8] [--gradient-steps 2] [--train-freq 1] [--set JSON] [--only sac,crossq] [--xla-threads 1]
+        [--curve 50000 --seeds 3 [--no-reference-curve]]
 """
 from __future__ import annotations
 
@@ -55,9 +56,11 @@ class Candidate:
                            extra="jax" if jax else "rl")
 
 
-def candidates(n: int, g: int, train_freq: int = 1) -> list[Candidate]:
-    many = {"n_envs": n, "gradient_steps": g, "train_freq": train_freq}
+def candidates(n: int, g: int, train_freq: int = 1, extra: dict | None = None) -> list[Candidate]:
+    many = {"n_envs": n, "gradient_steps": g, "train_freq": train_freq, **(extra or {})}
     tag = f"{n} env G={g}" + (f" every {train_freq}" if train_freq != 1 else "")
+    if extra:
+        tag += " " + " ".join(f"{k}={v}" for k, v in extra.items())
     return [
         Candidate("ppo SB3 (recipe)", "ppo", "stable-baselines3", "PPO"),
         Candidate("sac SB3 1 env (recipe)", "sac", "stable-baselines3", "SAC"),
@@ -190,6 +193,12 @@ def main(argv=None) -> int:
                                                                    "candidates (one collect = n_envs env steps)")
     ap.add_argument("--train-freq", type=int, default=1, help="steps of every copy per collect of the multi-copy "
                                                                "candidates (gradient steps G after each collect)")
+    ap.add_argument("--set", default=None, metavar="JSON",
+                    help="more recipe overrides of the multi-copy candidates, a JSON object in the recipe files' "
+                         "vocabulary (e.g. '{\"learning_rate\": \"lin_1e-3\", \"batch_size\": 512}'); named in "
+                         "their labels")
+    ap.add_argument("--no-reference-curve", action="store_true",
+                    help="--curve mode: do not train the PPO reference's curve (its throughput is still measured)")
     ap.add_argument("--only", default=None, help="comma-separated substrings: candidates whose label holds one "
                                                  "(the PPO reference is always kept)")
     ap.add_argument("--xla-threads", type=int, default=None,
@@ -213,7 +222,16 @@ def main(argv=None) -> int:
     from agents.train import set_threads
 
     set_threads(args.threads)
-    cands = candidates(args.n_envs, args.gradient_steps, args.train_freq)
+    extra = None
+    if args.set:
+        try:
+            extra = json.loads(args.set)
+        except json.JSONDecodeError as e:
+            extra = e
+        if not isinstance(extra, dict):
+            print(f"offpolicy_throughput: error: --set must be a JSON object, got {args.set!r}", file=sys.stderr)
+            return 2
+    cands = candidates(args.n_envs, args.gradient_steps, args.train_freq, extra)
     ref = cands[0].label
     if args.only:
         keys = [k.strip() for k in args.only.split(",") if k.strip()]
@@ -227,7 +245,7 @@ def main(argv=None) -> int:
     tp = throughput(cands, args.env, args.steps, args.warmup, args.repeats)
     cv = None
     if args.curve:
-        cv = curves(cands, args.env, args.curve, list(range(args.seed, args.seed + args.seeds)), args.points,
+        cv = curves(cands[1:] if args.no_reference_curve else cands, args.env, args.curve, list(range(args.seed, args.seed + args.seeds)), args.points,
                     args.episodes)
     print()
     print(f"{args.env}: {args.steps} env steps per window, best of {args.repeats}; torch threads {args.threads}, "
