@@ -12,6 +12,8 @@ computes does not depend on where it runs: the same spec gives the same record o
 from __future__ import annotations
 
 import os
+import socket
+import sys
 import tempfile
 import time
 
@@ -22,7 +24,7 @@ from .bench_store import RECORD_FILES, read_run_files
 from .config import gym_factory, parallel_factory
 from .evaluate import evaluate_policy
 
-__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "compile_kernels", "mean_trajectory"]
+__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "compile_kernels", "mean_trajectory", "executed_on"]
 
 
 def mean_trajectory(series) -> np.ndarray:
@@ -43,6 +45,16 @@ def _episode_payload(res) -> dict:
             "estimation_error_mean": mean_trajectory([r.estimation_error for r in res]).tolist() if res else []}
 
 
+def executed_on() -> dict:
+    """Where this work unit runs: ``{"host": hostname, "pid": process id, "ray_node_id": the Ray node's id
+    (``None`` outside a Ray worker)}`` (a record's ``executed_on``; it does not enter the numbers)."""
+    node = None
+    ray = sys.modules.get("ray")  # never imports Ray: a Ray worker has it imported already
+    if ray is not None and ray.is_initialized():
+        node = ray.get_runtime_context().get_node_id()
+    return {"host": socket.gethostname(), "pid": os.getpid(), "ray_node_id": node}
+
+
 def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``run_dir`` on the spec's episodes: the run's ``result.json`` document."""
     from .loading import load_agent
@@ -54,7 +66,7 @@ def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
                           parallel=a.multi_agent)
     eval_env.close()
     return {"signature": _run_signature(spec), "agent": spec["agent"], "seed": spec["seed"], "train_seconds": train_s,
-            "curve": curve, **_episode_payload(res), "cached": False,
+            "curve": curve, **_episode_payload(res), "cached": False, "executed_on": executed_on(),
             **({"recipe_file": spec["recipe_file"]} if "recipe_file" in spec else {})}
 
 

@@ -123,6 +123,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
         shutil.rmtree(sp["path"])
     specs = {(sp["env"], sp["agent"], sp["seed"]): sp for sp in P.specs}
     analytic: dict[str, dict] = {}
+    placed: dict[str, dict] = {}  # where each run trained or evaluated by this call ran
     t_train = time.perf_counter()
     bar = None
     with be:
@@ -141,6 +142,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                 key = job.key[1:]
                 write_record(specs[key]["path"], res)  # the driver writes; a finished run is kept from here on
                 results[key] = {**res["result"], "reevaluated": True} if res["reevaluated"] else res["result"]
+                placed["/".join(map(str, key))] = res["result"].get("executed_on")
                 if bar is not None:
                     bar.update(1)
         finally:
@@ -152,5 +154,5 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     for e in P.envs:
         per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e])
     return write_summary(out, P, per_env_rows, docs, backend=backend, address=address,
-                         workers=getattr(be, "workers", None),
+                         workers=getattr(be, "workers", None), executed_on=placed,
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

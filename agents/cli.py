@@ -7,6 +7,7 @@ import json
 import os
 import sys
 import time
+from collections import Counter
 
 from .bench_exec import BACKENDS
 from .bench_plan import AGENTS, BUDGETS
@@ -449,6 +450,10 @@ def _benchmark(args) -> int:
         print(table)
     for name, r in summ["recipe_files"].items():
         print(f"{name}: {r['label']} trained with {r['file']} (sha256 {r['sha256'][:12]}...)")
+    nodes = Counter((w["host"], w["ray_node_id"]) for w in summ["executed_on"].values() if w)
+    if len(nodes) > 1 or any(node for _, node in nodes):
+        print("runs of this call executed on: " + "; ".join(
+            f"{host}" + (f" (Ray node {node[:12]})" if node else "") + f": {n}" for (host, node), n in sorted(nodes.items(), key=str)))
     print(f"\nwrote {args.out}/summary.json, summary.png and <env>/results.{{csv,json}}, error_norms.png, "
           f"learning_curves.png; wall time {time.perf_counter() - t0:.0f} s")
     return 0

@@ -50,13 +50,17 @@ def _numbers(out: str) -> dict:
     return doc
 
 
-def _records(out: str) -> dict:
-    """Every stored run's ``result.json`` without its training wall time, by run directory."""
+def _records(out: str, where: dict | None = None) -> dict:
+    """Every stored run's ``result.json`` without its training wall time and where it ran, by run directory
+    (``where``: filled with the runs' ``executed_on``)."""
     recs = {}
     for r, _, files in os.walk(os.path.join(out, "models")):
         if "result.json" in files:
             res = json.load(open(os.path.join(r, "result.json")))
             res.pop("train_seconds")
+            if where is not None:
+                where[os.path.relpath(r, out)] = res.get("executed_on")
+            res.pop("executed_on", None)
             recs[os.path.relpath(r, out)] = res
     return recs
 
@@ -84,7 +88,13 @@ def test_process_backend_gives_the_serial_numbers(serial_run, tmp_path):
     summ = run_benchmark("tracking", "tiny", out, backend="process", workers=2, progress=False, **GRID)
     assert summ["backend"] == "process" and summ["workers"] == 2
     assert _numbers(out) == _numbers(serial_run)
-    assert _records(out) == _records(serial_run)
+    where, serial_where = {}, {}
+    assert _records(out, where) == _records(serial_run, serial_where)
+    # each record says where it ran: the serial runs in this process, the pool's in worker processes
+    assert {w["pid"] for w in serial_where.values()} == {os.getpid()}
+    assert all(w["pid"] != os.getpid() and w["ray_node_id"] is None for w in where.values())
+    assert summ["executed_on"] == {"/".join(("tracking", a, "0")): where[os.path.join("models", "tracking", "tiny", a,
+                                                                                       "s0")] for a in GRID["agents"]}
 
 
 def test_ray_backend_gives_the_serial_numbers(serial_run, local_ray, tmp_path):
@@ -93,7 +103,10 @@ def test_ray_backend_gives_the_serial_numbers(serial_run, local_ray, tmp_path):
     summ = run_benchmark("tracking", "tiny", out, backend="ray", progress=False, **GRID)
     assert summ["backend"] == "ray" and local_ray.is_initialized()  # the session it found is left as it is
     assert _numbers(out) == _numbers(serial_run)
-    assert _records(out) == _records(serial_run)
+    where = {}
+    assert _records(out, where) == _records(serial_run)
+    node = local_ray.get_runtime_context().get_node_id()  # the one node of the local Ray
+    assert {w["ray_node_id"] for w in where.values()} == {node} and os.getpid() not in {w["pid"] for w in where.values()}
     # the driver wrote each run's files (the workers trained in scratch directories of their own)
     for run in _records(out):
         assert sorted(os.listdir(os.path.join(out, run))) == ["config.json", "curve.json", "model.zip", "result.json",
