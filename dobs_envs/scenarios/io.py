@@ -314,7 +314,7 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     if "mas_agents" in d:
         agents = _agents_from(d["mas_agents"], source)
         try:
-            mas = compose_mas(agents)  # Section AIHMAS: the defaults of A, channels, C, known, links
+            mas = compose_mas(agents, name="mas_agents")  # Section AIHMAS: the defaults of A, channels, C, known, links
         except ValueError as exc:
             raise ScenarioFileError(source, "mas_agents", str(exc)) from None
         kw["mas_agents"] = mas.mas_agents
