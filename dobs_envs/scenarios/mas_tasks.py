@@ -58,7 +58,7 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg as sla
 
-from ..design.gains import shifted_are_feedback
+from ..design.gains import shifted_are_feedback, stabilising_are
 from ..linalg.validation import as_float
 from .scenario import Scenario
 from .composition import agent_offsets, compose_mas, ring_or_path
@@ -196,12 +196,10 @@ def rendezvous_lqr(agents=None, *, q_rest: float = DEFAULT_Q_REST, r: float = 1.
             "so that the disagreement dynamics decouple; use rho > 0 for these agents"
         )
     W = sla.null_space(v[None, :])  # (n, n-1) orthonormal, W^T v = 0
-    try:
-        X_xi = sla.solve_continuous_are(W.T @ A @ W, W.T @ B, W.T @ Q @ W, R)
-    except (np.linalg.LinAlgError, ValueError) as exc:
-        raise ValueError(f"rendezvous_lqr(rho=0): the disagreement-coordinate CARE has no stabilising solution: {exc}") from None
-    X = W @ (0.5 * (X_xi + X_xi.T)) @ W.T
-    K = -B.T @ X / r
+    X_xi = stabilising_are(W.T @ A @ W, W.T @ B, W.T @ Q @ W, R,
+                           what="rendezvous_lqr(rho=0): the disagreement-coordinate CARE")
+    X = W @ X_xi @ W.T
+    K = -B.T @ X / r  # -R^{-1} B^T X with R = r I
     return X, K
 
 
