@@ -59,7 +59,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..design.gains import shifted_are_feedback, stabilising_are
-from ..linalg.validation import as_float
+from ..linalg.validation import as_array, as_float
 from .scenario import Scenario
 from .composition import agent_offsets, compose_mas, ring_or_path
 from .paper import ne1_agents
@@ -87,21 +87,26 @@ _NE1_X0 = (-1.0, -2.0, -3.0, -4.0, 5.0, 4.0, 3.0, 2.0, 1.0)
 
 
 def _agent_dims(agents) -> list:
-    bad = ValueError("agents must be a sequence of (A_i, B_i, C_i) triples")
+    """``[n_0, ..., n_{N-1}]`` of the agents, after the checks every function here makes at its boundary.
+
+    Each block must be finite and real (complex entries are refused: the float block assembly would
+    drop the imaginary part) and ``A_i`` square (a scalar is ``(1, 1)``); errors name ``agents[i].A``
+    (``.B``, ``.C``) as the caller passed them. The block shapes against each other are
+    :func:`~dobs_envs.scenarios.composition.compose_mas`'s check (``agents[i]: ...``).
+    """
     try:
         triples = [(a, b, c) for a, b, c in agents]
     except (TypeError, ValueError):
-        raise bad from None
-    for i, triple in enumerate(triples):
-        for name, M in zip("ABC", triple):
-            if np.iscomplexobj(M):  # the float block assembly would drop the imaginary part
-                raise ValueError(f"agents: agent {i}: {name} must be real, got a complex array")
-    try:
-        dims = [int(np.atleast_2d(np.asarray(a, dtype=float)).shape[0]) for a, _, _ in triples]
-    except (TypeError, ValueError):
-        raise bad from None
-    if not dims:
+        raise ValueError("agents must be a sequence of (A_i, B_i, C_i) triples") from None
+    if not triples:
         raise ValueError("agents must contain at least one agent")
+    dims = []
+    for i, triple in enumerate(triples):
+        A_i, _, _ = (as_array(M, f"agents[{i}].{name}") for name, M in zip("ABC", triple))
+        A_i = np.atleast_2d(A_i)
+        if A_i.ndim != 2 or A_i.shape[0] != A_i.shape[1]:
+            raise ValueError(f"agents[{i}].A must be square (n_i, n_i), got shape {A_i.shape}")
+        dims.append(int(A_i.shape[0]))
     return dims
 
 
