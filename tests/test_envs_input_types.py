@@ -61,7 +61,7 @@ def test_valid_cost_weights_are_accepted_and_symmetrised():
     (lambda: Graph(np.array([[0, 1 + 1j], [1 - 1j, 0]])), "adjacency must be real"),
     (lambda: Graph.from_edges(3, [(0, 1), (1, 2)], weights=[1.0, 1j]), "weights must be real"),
     (lambda: Sinusoids(amplitude=[1.0, 1j], frequency=1.0, phase=0.0), "amplitude must be real"),
-    (lambda: rendezvous_scenario(agents=[(np.array([[1j]]), [[1.0]], [[1.0]])] + list(ne1_agents())[1:]), "agent 0: A"),
+    (lambda: rendezvous_scenario(agents=[(np.array([[1j]]), [[1.0]], [[1.0]])] + list(ne1_agents())[1:]), r"agents\[0\]\.A must be real"),
 ])
 def test_complex_inputs_are_refused_with_their_name(make, match):
     with pytest.raises(ValueError, match=match):

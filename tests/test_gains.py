@@ -4,7 +4,14 @@ import pytest
 import scipy.linalg as sla
 
 from dobs_envs.assumptions import DetectabilityError, StabilizabilityError
-from dobs_envs.design.gains import lyapunov_P, observer_are_gain, shifted_are_feedback, split_gain
+from dobs_envs.design.gains import (
+    lyapunov_P,
+    observer_are_gain,
+    shifted_are_feedback,
+    sliding_mode_P,
+    split_gain,
+    stabilising_are,
+)
 
 import paper_ne2 as NE2  # the tests' transcription of NE2 (tests/paper_ne2.py)
 
@@ -81,6 +88,53 @@ def test_ne3_lyapunov_P():
     assert np.linalg.norm(res) <= 1e-10 * max(1.0, np.linalg.norm(P) * np.linalg.norm(A_cl))
     np.testing.assert_allclose(P, P.T, atol=0)
     assert np.linalg.eigvalsh(P).min() > 0
+
+
+def test_sliding_mode_P_is_lyapunov_P_of_the_closed_loop():
+    """NE3: P of eq. (centralsliding) solves (A + BK)^T P + P (A + BK) = -Q; the same array as lyapunov_P(A + B K)."""
+    A, chans = ne2_system()
+    B = np.hstack(chans)
+    _, K = shifted_are_feedback(A, B)
+    P = sliding_mode_P(A, B, K)
+    np.testing.assert_array_equal(P, lyapunov_P(A + B @ K))  # one formula: bit for bit
+    Q = np.diag(np.arange(1.0, 10.0))
+    P2 = sliding_mode_P(A, B, K, Q=Q)
+    A_cl = A + B @ K
+    res = A_cl.T @ P2 + P2 @ A_cl + Q
+    assert np.linalg.norm(res) <= 1e-10 * max(1.0, np.linalg.norm(P2) * np.linalg.norm(A_cl))
+
+
+def test_sliding_mode_P_names_bad_arguments():
+    A, chans = ne2_system()
+    B = np.hstack(chans)
+    with pytest.raises(ValueError, match=r"^K must have shape \(5, 9\)"):
+        sliding_mode_P(A, B, np.zeros((9, 5)))
+    with pytest.raises(ValueError, match=r"^B must have shape \(9, \*\)"):
+        sliding_mode_P(A, B[:4], np.zeros((5, 9)))
+    with pytest.raises(ValueError, match="not Hurwitz"):  # K = 0 leaves NE2's integrators
+        sliding_mode_P(A, B, np.zeros((5, 9)))
+
+
+def test_stabilising_are_solves_and_symmetrises():
+    """The one ARE solve: A^T X + X A - X B R^-1 B^T X + Q = 0, X exactly symmetric; the gains use it."""
+    rng = np.random.default_rng(3)
+    A, B = rng.standard_normal((5, 5)), rng.standard_normal((5, 2))
+    Q, R = np.eye(5), np.array([[2.0, 0.5], [0.5, 1.0]])
+    X = stabilising_are(A, B, Q, R)
+    np.testing.assert_array_equal(X, X.T)
+    res = A.T @ X + X @ A - X @ B @ np.linalg.solve(R, B.T @ X) + Q
+    assert np.linalg.norm(res) <= 1e-9 * max(1.0, np.linalg.norm(X) ** 2)
+    X2, _ = shifted_are_feedback(A, B, shift=0.0, Q=Q, R=R)
+    np.testing.assert_array_equal(X2, X)
+
+
+def test_stabilising_are_errors_name_the_equation():
+    with pytest.raises(ValueError, match=r"^my ARE has no stabilising solution \(hint\): "):
+        stabilising_are(np.eye(1), np.zeros((1, 1)), np.eye(1), np.eye(1), what="my ARE", hint=" (hint)")
+    with pytest.raises(ValueError, match=r"^the ARE has no stabilising solution: .*symmetric"):
+        stabilising_are(np.eye(2), np.eye(2), np.array([[1.0, 1.0], [0.0, 1.0]]), np.eye(2))
+    with pytest.raises(ValueError, match=r"^R must have shape \(2, 2\)"):
+        stabilising_are(np.eye(2), np.eye(2), np.eye(2), np.eye(3))
 
 
 def test_lyapunov_rejects_non_hurwitz():

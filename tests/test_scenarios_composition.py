@@ -42,11 +42,34 @@ def test_vectors_and_scalars_follow_the_scenario_conventions():
     np.testing.assert_array_equal(mas.C[1], [[0.0, 1.0, 0.0]])
 
 
-@pytest.mark.parametrize("agent", [([[0, 1], [0, 0]], [[1], [0], [0]], [[1, 0]]),  # B_1 with 3 rows
-                                   ([[0, 1], [0, 0]], [[1], [0]], [[1, 0, 0]])])  # C_1 with 3 columns
-def test_inconsistent_blocks_are_named(agent):
-    with pytest.raises(ValueError, match=r"mas_agents\[1\]: B must have 2 rows and C 2 columns"):
+@pytest.mark.parametrize("agent, shapes", [(([[0, 1], [0, 0]], [[1], [0], [0]], [[1, 0]]), r"\(3, 1\) and C of shape \(1, 2\)"),
+                                           (([[0, 1], [0, 0]], [[1], [0]], [[1, 0, 0]]), r"\(2, 1\) and C of shape \(1, 3\)")])
+def test_inconsistent_blocks_are_named(agent, shapes):
+    """The message names the caller's argument (``agents`` by default, ``name=`` for scenario files) and the shapes."""
+    with pytest.raises(ValueError, match=r"^agents\[1\]: B must have 2 rows and C 2 columns, got B of shape " + shapes):
         compose_mas([(0.0, 1.0, 1.0), agent])
+    with pytest.raises(ValueError, match=r"^mas_agents\[1\]: B must have 2 rows"):
+        compose_mas([(0.0, 1.0, 1.0), agent], name="mas_agents")
+
+
+def test_design_layer_holds_the_composition():
+    """One composition: the scenarios' names are the design layer's objects, and the MAS observer composes with it."""
+    from dobs_envs.design import mas_composition
+    from dobs_envs.design.observer import design_mas_observer
+    from dobs_envs.scenarios import composition
+
+    for name in mas_composition.__all__:
+        assert getattr(composition, name) is getattr(mas_composition, name)
+    agents = _agents(np.random.default_rng(1))  # n_i = 1, 2, 3; m_i = 1, 2, 1; p_i = 1, 1, 2
+    agents[0] = (np.array([[-1.0]]), agents[0][1], agents[0][2])  # (A_0, C_0) detectable for the design
+    d = design_mas_observer(agents, path_graph(3), shift=0.0)
+    mas = compose_mas(agents)
+    np.testing.assert_array_equal(d.A, mas.A)
+    np.testing.assert_array_equal(d.B, np.hstack(mas.channels))
+    assert d.channel_slices == (slice(0, 1), slice(1, 3), slice(3, 4))
+    for i, Ci in enumerate(mas.C):
+        np.testing.assert_array_equal(d.C_node(i), Ci)
+        np.testing.assert_array_equal(d.known[i], np.isin(np.arange(4), np.arange(4)[d.channel_slices[i]]))
 
 
 def test_builders_share_the_composition():

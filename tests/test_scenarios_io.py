@@ -115,6 +115,19 @@ def test_mas_agents_only():
     sc.design
 
 
+def test_mas_agents_block_shapes_are_named_by_the_file_key(tmp_path):
+    """A scenario file's agents are the key ``mas_agents``: the composition's shape error says ``mas_agents[i]``."""
+    path = tmp_path / "bad_agents.yaml"
+    path.write_text(yaml.safe_dump({
+        "name": "bad", "graph": {"topology": "path"}, "x0": [1, 2, 3],
+        "mas_agents": [{"A": [[0]], "B": [[1]], "C": [[1]]},
+                       {"A": [[0, 1], [0, 0]], "B": [[0], [1]], "C": [[1, 0, 0]]}]}))  # C_1 with 3 columns
+    with pytest.raises(ScenarioFileError, match=r"bad_agents\.yaml: key 'mas_agents': mas_agents\[1\]: B must have 2 rows "
+                                                r"and C 2 columns, got B of shape \(2, 1\) and C of shape \(1, 3\)") as ei:
+        load_scenario(path)
+    assert ei.value.key == "mas_agents"
+
+
 @pytest.mark.parametrize(
     "over, key, text",
     [

@@ -118,6 +118,30 @@ def test_scenario_fields():
         rendezvous_scenario(agents=ne1().mas_agents[:3])
 
 
+_OK = (np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)))
+_DBL = np.array([[0.0, 1.0], [0.0, 0.0]])
+
+
+@pytest.mark.parametrize("agent, message, composes", [
+    ((_DBL, np.ones((3, 1)), np.array([[1.0, 0.0]])), r"agents\[1\]: B must have 2 rows and C 2 columns, got B of shape \(3, 1\)", True),
+    ((_DBL, np.array([[0.0], [1.0]]), np.ones((1, 3))), r"agents\[1\]: B must have 2 rows and C 2 columns, got B of shape \(2, 1\) and C of shape \(1, 3\)", True),
+    ((np.array([[np.nan, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])), r"agents\[1\]\.A contains NaN or inf", False),
+    ((np.zeros((2, 3)), np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])), r"agents\[1\]\.A must be square \(n_i, n_i\), got shape \(2, 3\)", False),
+    ((_DBL, np.array([[0.0], [np.inf]]), np.array([[1.0, 0.0]])), r"agents\[1\]\.B contains NaN or inf", False),
+    ((_DBL, np.array([[0.0], [1.0]]), np.array([[1.0, 1j]])), r"agents\[1\]\.C must be real", False),
+])
+def test_bad_agents_are_named_as_the_caller_passed_them(agent, message, composes):
+    """The rendezvous functions take ``agents``: their errors say ``agents[i]`` (not the Scenario/file key ``mas_agents``)."""
+    agents = [_OK, agent]
+    calls = [lambda: rendezvous_scenario(agents=agents, x0=np.zeros(3)), lambda: rendezvous_lqr(agents)]
+    if not composes:  # block-by-block checks: every entry point refuses them by the same name
+        calls += [lambda: rendezvous_cost(agents), lambda: position_indices(agents)]
+    for call in calls:
+        with pytest.raises(ValueError, match="^" + message) as ei:
+            call()
+        assert "mas_agents" not in str(ei.value)
+
+
 def test_rho_zero_requires_equilibrium_common_mode():
     agents = [(np.array([[0.5]]), np.array([[1.0]]), np.array([[1.0]]))] * 2
     with pytest.raises(ValueError, match="rho > 0"):

@@ -5,10 +5,15 @@
   ``K^k = -(B^k)^T X`` (eq. ``linearfeedback``). All closed-loop eigenvalues of
   ``A + B K`` then have ``Re < -s``.
 * :func:`lyapunov_P` -- NE3: ``A_cl^T P + P A_cl = -Q`` (``A_cl = A + B K``), the
-  sliding-mode gain ``P`` of eqs. ``centralsliding``/``slidingfeedback``.
+  sliding-mode gain ``P`` of eqs. ``centralsliding``/``slidingfeedback``;
+  :func:`sliding_mode_P` forms ``A_cl`` from ``(A, B, K)``.
 * :func:`observer_are_gain` -- NE1: ``(A + sI) X + X (A + sI)^T - X C^T C X + I = 0``,
   ``L = -X C^T`` (the ``breve L_i`` of eq. ``obidynamicMAS``); ``A + L C`` has
   eigenvalues with ``Re < -s``.
+
+* :func:`stabilising_are` -- the one call of the ARE solver behind all of them (and the
+  rendezvous LQR of :mod:`dobs_envs.scenarios.mas_tasks`): the stabilising ``X``,
+  symmetrised, or a ``ValueError`` naming the equation.
 
 Solvers: :func:`scipy.linalg.solve_continuous_are` and
 :func:`scipy.linalg.solve_continuous_lyapunov`; nothing is inverted.
@@ -22,11 +27,55 @@ from .. import assumptions as _asm
 from ..linalg.subspaces import is_hurwitz
 from ..linalg.validation import as_float, as_matrix, as_square, as_symmetric
 
-__all__ = ["shifted_are_feedback", "lyapunov_P", "observer_are_gain", "split_gain"]
+__all__ = ["stabilising_are", "shifted_are_feedback", "lyapunov_P", "sliding_mode_P", "observer_are_gain",
+           "split_gain"]
 
 
 def _shift(shift) -> float:
     return as_float(shift, "shift", minimum=0.0)
+
+
+def stabilising_are(A, B, Q, R, *, what: str = "the ARE", hint: str = "") -> np.ndarray:
+    """Stabilising solution of ``A^T X + X A - X B R^{-1} B^T X + Q = 0``, symmetrised exactly.
+
+    :func:`scipy.linalg.solve_continuous_are` (Schur method, no inverse), then
+    ``X = (X + X^T) / 2``. Shapes are checked here (values pass unchanged); symmetry of
+    ``Q`` and ``R`` and the existence of the solution are the solver's, reported as below.
+    The weights' definiteness and the stabilisability margin are the caller's boundary
+    checks (:func:`shifted_are_feedback`, :func:`observer_are_gain`).
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+    B : array_like, shape (n, m)
+    Q : array_like, shape (n, n)
+    R : array_like, shape (m, m)
+    what : str
+        The equation's name in the error message (e.g. the caller and its ARE).
+    hint : str
+        Appended to "has no stabilising solution" (e.g. which pair must be detectable).
+
+    Returns
+    -------
+    X : ndarray, shape (n, n), symmetric.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes (naming the argument), or ``"{what} has no stabilising solution{hint}: ..."``
+        with the solver's reason.
+    """
+    A = as_square(A, "A")
+    n = A.shape[0]
+    B = as_matrix(B, "B", rows=n)
+    m = B.shape[1]
+    Q = as_matrix(Q, "Q", rows=n, cols=n)
+    R = as_matrix(R, "R", rows=m, cols=m)
+    try:
+        X = sla.solve_continuous_are(A, B, Q, R)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ValueError(f"{what} has no stabilising solution{hint}: {exc}") from None
+    return 0.5 * (X + X.T)
 
 
 def shifted_are_feedback(A, B, shift: float = 0.2, Q=None, R=None) -> tuple[np.ndarray, np.ndarray]:
@@ -72,14 +121,8 @@ def shifted_are_feedback(A, B, shift: float = 0.2, Q=None, R=None) -> tuple[np.n
     R = as_symmetric(R, m, "R", definite=True)
     _asm.check_stabilizable(A, B, margin=s)
     As = A + s * np.eye(n)
-    try:
-        X = sla.solve_continuous_are(As, B, Q, R)
-    except (np.linalg.LinAlgError, ValueError) as exc:
-        raise ValueError(
-            "shifted_are_feedback: the ARE (A + sI)^T X + X (A + sI) - X B R^-1 B^T X + Q = 0 "
-            f"has no stabilising solution (is (Q, A + {s:g} I) detectable?): {exc}"
-        ) from None
-    X = 0.5 * (X + X.T)
+    X = stabilising_are(As, B, Q, R, what="shifted_are_feedback: the ARE (A + sI)^T X + X (A + sI) - X B R^-1 B^T X "
+                        "+ Q = 0", hint=f" (is (Q, A + {s:g} I) detectable?)")
     K = -np.linalg.solve(R, B.T @ X)
     return X, K
 
@@ -124,6 +167,33 @@ def lyapunov_P(A_cl, Q=None) -> np.ndarray:
     return 0.5 * (P + P.T)
 
 
+def sliding_mode_P(A, B, K, Q=None) -> np.ndarray:
+    """The gain ``P`` of the sliding-mode law ``u = K x - beta h(B^T P x)`` (eq. ``centralsliding``).
+
+    Section NE3: ``P`` is the positive definite solution of
+    ``(A + B K)^T P + P (A + B K) = -Q`` (NE3: ``Q = I``), i.e.
+    :func:`lyapunov_P` of ``A_cl = A + B K``.
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+    B : array_like, shape (n, m)
+        Stacked channels ``[B^1 ... B^K]`` (eq. ``Busplit``).
+    K : array_like, shape (m, n)
+        Stacked feedback ``col(K^k)`` with ``A + B K`` Hurwitz (e.g. from :func:`shifted_are_feedback`).
+    Q : array_like, shape (n, n), optional
+        As for :func:`lyapunov_P` (default ``I``).
+
+    Returns ``P (n, n)`` and raises as :func:`lyapunov_P` does; a ``ValueError`` names a
+    badly shaped ``A``, ``B`` or ``K``.
+    """
+    A = as_square(A, "A")
+    n = A.shape[0]
+    B = as_matrix(B, "B", rows=n, vector_as="col")
+    K = as_matrix(K, "K", rows=B.shape[1], cols=n, vector_as="row")
+    return lyapunov_P(A + B @ K, Q)
+
+
 def observer_are_gain(A, C, shift: float = 0.2, *, name: str = "(A, C)") -> np.ndarray:
     """Observer gain of Section NE1 from the shifted filter ARE.
 
@@ -155,9 +225,5 @@ def observer_are_gain(A, C, shift: float = 0.2, *, name: str = "(A, C)") -> np.n
     s = _shift(shift)
     _asm.check_detectable(A, C, margin=s, name=name)
     As = A + s * np.eye(n)
-    try:
-        X = sla.solve_continuous_are(As.T, C.T, np.eye(n), np.eye(p))
-    except (np.linalg.LinAlgError, ValueError) as exc:  # pragma: no cover - guarded above
-        raise ValueError(f"observer_are_gain: filter ARE for {name} has no stabilising solution: {exc}") from None
-    X = 0.5 * (X + X.T)
+    X = stabilising_are(As.T, C.T, np.eye(n), np.eye(p), what=f"observer_are_gain: filter ARE for {name}")
     return -X @ C.T

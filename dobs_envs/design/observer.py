@@ -39,6 +39,7 @@ from ..linalg.subspaces import is_hurwitz, scaled_rank
 from ..linalg.validation import as_matrix, as_square, check_tol
 from .gains import observer_are_gain
 from .lemma2 import StrongDetectability, lemma2_residuals
+from .mas_composition import agent_offsets, compose_mas
 from .node_tasks import DESIGN_BACKENDS, run_node_designs
 
 __all__ = [
@@ -243,6 +244,24 @@ def _known_indices(known, N: int, K: int) -> list[list[int]]:
     return out
 
 
+def _channel_slices(chans) -> list[slice]:
+    """Columns of each channel ``B^k (n, m_k)`` in ``B = [B^0 ... B^{K-1}]`` (eq. Busplit)."""
+    slices, start = [], 0
+    for b in chans:
+        slices.append(slice(start, start + b.shape[1]))
+        start += b.shape[1]
+    return slices
+
+
+def _known_mask(known_idx, slices, N: int, m: int) -> np.ndarray:
+    """``(N, m)`` bool: the columns of ``B`` whose input node ``i`` receives (its ``B_i``, eq. splitinput)."""
+    known_mask = np.zeros((N, m), dtype=bool)
+    for i, ks in enumerate(known_idx):
+        for k in ks:
+            known_mask[i, slices[k]] = True
+    return known_mask
+
+
 def _assemble(A, B, slices, B_v, C_list, known_mask, g, T_d, T_u, E, F, G, lemma2) -> ObserverDesign:
     """Eq. (barEFGB)/(TidTiu) for every node, node axis first."""
     n = A.shape[0]
@@ -363,10 +382,7 @@ def design_distributed_observer(
         )
     chans = [as_matrix(b, f"channels[{k}]", rows=n, vector_as="col") for k, b in enumerate(channels)]
     K = len(chans)
-    slices, start = [], 0
-    for b in chans:
-        slices.append(slice(start, start + b.shape[1]))
-        start += b.shape[1]
+    slices = _channel_slices(chans)
     B = np.hstack(chans) if chans else np.zeros((n, 0))
     m = B.shape[1]
     B_v = np.zeros((n, 0)) if B_v is None else as_matrix(B_v, "B_v", rows=n, vector_as="col")
@@ -382,10 +398,7 @@ def design_distributed_observer(
     known_idx = _known_indices(known, N, K)
     g = _graph_for(graph, N)
 
-    known_mask = np.zeros((N, m), dtype=bool)
-    for i, ks in enumerate(known_idx):
-        for k in ks:
-            known_mask[i, slices[k]] = True
+    known_mask = _known_mask(known_idx, slices, N, m)
 
     # Assumption 5 first: cheap and independent of the Lemma 2 computations
     _asm.check_connected(g)
@@ -417,8 +430,9 @@ def design_mas_observer(agents: Sequence, graph, *, shift: float = 0.2, L: Seque
     """Observer of eq. (``obidynamicMAS``) for a heterogeneous multi-agent system (``HMAS``).
 
     Agent ``i`` has ``breve x_i' = A_i breve x_i + B_i u_i``, ``y_i = C_i breve x_i``
-    and knows only ``u_i`` and ``y_i``. The overall system has
-    ``A = diag(A_i)``, ``B = diag(B_i)`` (channel ``i`` = agent ``i``),
+    and knows only ``u_i`` and ``y_i``. The overall system
+    (:func:`~dobs_envs.design.mas_composition.compose_mas`, the composition the MAS
+    scenarios use) has ``A = diag(A_i)``, ``B = diag(B_i)`` (channel ``i`` = agent ``i``),
     ``C_i`` padded to the block row of agent ``i``, and
     ``T_id = [0 I_{n_i} 0]^T`` (block selector). The gains are::
 
@@ -474,25 +488,19 @@ def design_mas_observer(agents: Sequence, graph, *, shift: float = 0.2, L: Seque
         Ai.append(a), Bi.append(b), Ci.append(c)
     g = _graph_for(graph, N)
 
+    # eq. (HMAS) as one plant (Section AIHMAS): A = diag(A_i), B^i = [0 B_i^T 0]^T, C_i = [0 C_i 0], known[i] = (i,)
+    mas = compose_mas(zip(Ai, Bi, Ci))
+    A = mas.A
+    chans = mas.channels
+    slices = _channel_slices(chans)
+    B = np.hstack(chans)  # diag(B_i)
+    n = A.shape[0]
     n_i = [a.shape[0] for a in Ai]
-    m_i = [b.shape[1] for b in Bi]
-    offs = np.concatenate([[0], np.cumsum(n_i)]).astype(int)
-    moff = np.concatenate([[0], np.cumsum(m_i)]).astype(int)
-    n, m = int(offs[-1]), int(moff[-1])
-    A = np.zeros((n, n))
-    B = np.zeros((n, m))
-    C_list, T_d, T_u, E, F, G = [], [], [], [], [], []
-    slices = []
+    offs = agent_offsets(n_i)
+    C_list, T_d, T_u, E, F, G = list(mas.C), [], [], [], [], []
     I = np.eye(n)
     for i in range(N):
-        r = slice(offs[i], offs[i + 1])
-        A[r, r] = Ai[i]
-        B[r, moff[i]:moff[i + 1]] = Bi[i]
-        slices.append(slice(int(moff[i]), int(moff[i + 1])))
-        Cfull = np.zeros((Ci[i].shape[0], n))
-        Cfull[:, r] = Ci[i]
-        C_list.append(Cfull)
-        T_d.append(I[:, r].copy())  # block selector [0 I_{n_i} 0]^T
+        T_d.append(I[:, offs[i]:offs[i + 1]].copy())  # block selector [0 I_{n_i} 0]^T
         T_u.append(np.delete(I, np.arange(offs[i], offs[i + 1]), axis=1))
         name = f"agent {i} (0-based)"
         if L is None:
@@ -509,7 +517,5 @@ def design_mas_observer(agents: Sequence, graph, *, shift: float = 0.2, L: Seque
     _asm.check_connected(g)  # Assumption 5
     _asm.check_collective_detectability(T_d, n)  # Assumption 6 (holds by construction)
 
-    known_mask = np.zeros((N, m), dtype=bool)
-    for i in range(N):
-        known_mask[i, slices[i]] = True
+    known_mask = _known_mask(mas.known, slices, N, B.shape[1])
     return _assemble(A, B, slices, np.zeros((n, 0)), C_list, known_mask, g, T_d, T_u, E, F, G, None)

@@ -62,7 +62,7 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from ..design.gains import lyapunov_P, shifted_are_feedback
+from ..design.gains import shifted_are_feedback, sliding_mode_P
 from ..graphs import Graph, random_connected_graph
 from .scenario import Scenario
 from .composition import TOPOLOGIES, compose_mas
@@ -314,7 +314,7 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     if "mas_agents" in d:
         agents = _agents_from(d["mas_agents"], source)
         try:
-            mas = compose_mas(agents)  # Section AIHMAS: the defaults of A, channels, C, known, links
+            mas = compose_mas(agents, name="mas_agents")  # Section AIHMAS: the defaults of A, channels, C, known, links
         except ValueError as exc:
             raise ScenarioFileError(source, "mas_agents", str(exc)) from None
         kw["mas_agents"] = mas.mas_agents
@@ -373,7 +373,7 @@ def scenario_from_dict(d: Mapping[str, Any], *, source: str = "<dict>") -> Scena
     if ("P" not in kw and controller in _SLIDING and A is not None and K_arr is not None
             and K_arr.shape == (B.shape[1], A.shape[0])):  # else Scenario names the bad K
         try:
-            kw["P"] = lyapunov_P(A + B @ K_arr)
+            kw["P"] = sliding_mode_P(A, B, K_arr)
         except ValueError as exc:
             raise ScenarioFileError(source, "P", f"omitted, and (A + BK)^T P + P (A + BK) = -I failed: {exc}") from None
     try:

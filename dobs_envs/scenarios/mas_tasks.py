@@ -58,8 +58,8 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg as sla
 
-from ..design.gains import shifted_are_feedback
-from ..linalg.validation import as_float
+from ..design.gains import shifted_are_feedback, stabilising_are
+from ..linalg.validation import as_array, as_float
 from .scenario import Scenario
 from .composition import agent_offsets, compose_mas, ring_or_path
 from .paper import ne1_agents
@@ -87,21 +87,26 @@ _NE1_X0 = (-1.0, -2.0, -3.0, -4.0, 5.0, 4.0, 3.0, 2.0, 1.0)
 
 
 def _agent_dims(agents) -> list:
-    bad = ValueError("agents must be a sequence of (A_i, B_i, C_i) triples")
+    """``[n_0, ..., n_{N-1}]`` of the agents, after the checks every function here makes at its boundary.
+
+    Each block must be finite and real (complex entries are refused: the float block assembly would
+    drop the imaginary part) and ``A_i`` square (a scalar is ``(1, 1)``); errors name ``agents[i].A``
+    (``.B``, ``.C``) as the caller passed them. The block shapes against each other are
+    :func:`~dobs_envs.scenarios.composition.compose_mas`'s check (``agents[i]: ...``).
+    """
     try:
         triples = [(a, b, c) for a, b, c in agents]
     except (TypeError, ValueError):
-        raise bad from None
-    for i, triple in enumerate(triples):
-        for name, M in zip("ABC", triple):
-            if np.iscomplexobj(M):  # the float block assembly would drop the imaginary part
-                raise ValueError(f"agents: agent {i}: {name} must be real, got a complex array")
-    try:
-        dims = [int(np.atleast_2d(np.asarray(a, dtype=float)).shape[0]) for a, _, _ in triples]
-    except (TypeError, ValueError):
-        raise bad from None
-    if not dims:
+        raise ValueError("agents must be a sequence of (A_i, B_i, C_i) triples") from None
+    if not triples:
         raise ValueError("agents must contain at least one agent")
+    dims = []
+    for i, triple in enumerate(triples):
+        A_i, _, _ = (as_array(M, f"agents[{i}].{name}") for name, M in zip("ABC", triple))
+        A_i = np.atleast_2d(A_i)
+        if A_i.ndim != 2 or A_i.shape[0] != A_i.shape[1]:
+            raise ValueError(f"agents[{i}].A must be square (n_i, n_i), got shape {A_i.shape}")
+        dims.append(int(A_i.shape[0]))
     return dims
 
 
@@ -196,12 +201,10 @@ def rendezvous_lqr(agents=None, *, q_rest: float = DEFAULT_Q_REST, r: float = 1.
             "so that the disagreement dynamics decouple; use rho > 0 for these agents"
         )
     W = sla.null_space(v[None, :])  # (n, n-1) orthonormal, W^T v = 0
-    try:
-        X_xi = sla.solve_continuous_are(W.T @ A @ W, W.T @ B, W.T @ Q @ W, R)
-    except (np.linalg.LinAlgError, ValueError) as exc:
-        raise ValueError(f"rendezvous_lqr(rho=0): the disagreement-coordinate CARE has no stabilising solution: {exc}") from None
-    X = W @ (0.5 * (X_xi + X_xi.T)) @ W.T
-    K = -B.T @ X / r
+    X_xi = stabilising_are(W.T @ A @ W, W.T @ B, W.T @ Q @ W, R,
+                           what="rendezvous_lqr(rho=0): the disagreement-coordinate CARE")
+    X = W @ X_xi @ W.T
+    K = -B.T @ X / r  # -R^{-1} B^T X with R = r I
     return X, K
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..design.gains import lyapunov_P, shifted_are_feedback
+from ..design.gains import shifted_are_feedback, sliding_mode_P
 from ..graphs import ring_graph
 from .scenario import Scenario
 from .composition import compose_mas
@@ -42,10 +42,14 @@ def ne2_plant():
     return A, channels, C
 
 
-def _ne2_like(name, *, description, controller, **overrides):
+def _ne2_like(name, *, description, controller, sliding: bool = False, **overrides):
+    """NE2's plant, nodes, graph and links with ``K^k = -(B^k)^T X`` (shifted ARE, ``s = 0.2``); with
+    ``sliding=True`` also NE3's ``P``: ``(A + BK)^T P + P (A + BK) = -I``."""
     A, channels, C = ne2_plant()
     B = np.hstack(channels)
     _, K = shifted_are_feedback(A, B, shift=0.2)  # K^k = -(B^k)^T X
+    if sliding:
+        overrides["P"] = sliding_mode_P(A, B, K)
     base = dict(
         name=name,
         A=A, channels=channels, C=C,
@@ -105,18 +109,15 @@ def ne3(*, t_end: float = 20.0, dt: float = 1e-3, epsilon: float = 0.2) -> Scena
     ``phi_i = 5``; ``gamma_is(0) = 0.1``, ``sigma_is = 0.1``, ``phi_is = 10``;
     ``x(0) = (1, -1, 1, -1, 1, -1, 1, -1, 1)``. Graph and links as in NE2.
     """
-    A, channels, _ = ne2_plant()
-    B = np.hstack(channels)
-    _, K = shifted_are_feedback(A, B, shift=0.2)
-    P = lyapunov_P(A + B @ K)
+    _, channels, _ = ne2_plant()
     return _ne2_like(
         "ne3",
         description=ne3.__doc__.split("\n\n")[0],
         controller="adaptive_sliding_mode",
+        sliding=True,  # P from (A + BK)^T P + P (A + BK) = -I
         B_v=np.hstack([channels[0], channels[1]]),
         exosystem=np.array([[0.0, 0.5], [-0.5, 0.0]]),
         v0=[-2.0, 2.0],
-        P=P,
         x0=[1, -1, 1, -1, 1, -1, 1, -1, 1],
         gamma0=0.1, sigma=0.2, phi=5.0,
         gamma_s0=0.1, sigma_s=0.1, phi_s=10.0,

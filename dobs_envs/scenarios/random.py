@@ -55,7 +55,7 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from .. import assumptions as _asm
-from ..design.gains import lyapunov_P, shifted_are_feedback
+from ..design.gains import shifted_are_feedback, sliding_mode_P
 from ..graphs import Graph, as_graph, random_connected_graph
 from ..linalg.subspaces import is_hurwitz
 from ..linalg.validation import as_flag, as_float, as_int, check_seed
@@ -202,7 +202,7 @@ def _finish(rng, *, controller, A, B, shift, x0_scale, base: dict, overrides: di
     kw = dict(base)
     kw["K"] = K
     if controller in ("sliding_mode", "adaptive_sliding_mode"):
-        kw["P"] = lyapunov_P(A + B @ K)
+        kw["P"] = sliding_mode_P(A, B, K)  # (A + BK)^T P + P (A + BK) = -I
         kw.update(_NE3_CONSTANTS)
     if controller == "tracking":
         kw["reference"] = _signals(rng, m)
