@@ -94,7 +94,7 @@ class _IdealExchange:
 
     def __init__(self, p, B):
         self.p = p
-        self.deg = np.broadcast_to(np.diagonal(p.laplacian), (B, p.n_nodes))
+        self.deg = np.broadcast_to(np.diagonal(p.laplacian), (B, p.laplacian.shape[0]))
 
     def grid(self, j, xhat):
         """``d`` at Euler step ``j`` of the period (all copies)."""
