@@ -79,8 +79,8 @@ def test_zero_rates_reproduce_the_reference(make):
     ``d_i`` is summed (link by link, ``sum_e a_e (xhat_i - r_e)``, against the Laplacian row
     ``deg_i xhat_i - sum_j a_ij xhat_j``): a few ulps per evaluation, which the stable observer error
     dynamics do not amplify (measured: below 4e-16 relative after 20 periods on NE2); 1e-12 leaves
-    a wide margin and still fails on any modelling difference (a one-step lag of the exchange
-    changes ``z`` at 1e-4)."""
+    a wide margin and still fails on a modelling difference (a sampled exchange, ``oo_period = T``,
+    moves ``z`` by more than 1e-4 in 5 periods: :func:`test_sampled_exchange_changes_the_trajectory`)."""
     prm, state, rng = make()
     B, m = state[0].shape[0], prm.n_inputs
     u = 0.3 * rng.normal(size=(B, m))
@@ -449,6 +449,7 @@ def test_draw_distributions():
     ({"oo_delay": -1}, "faults: oo_delay must be an integer >= 0"),
     ({"oo_delay": MAX_DELAY + 1}, f"faults: oo_delay must be an integer <= {MAX_DELAY}"),
     ({"co_delay": "2"}, "faults: co_delay must be an integer"),
+    ({"co_delay": -3}, "faults: co_delay must be an integer >= 0"),
     ({"measurement_noise": -0.01}, "faults: measurement_noise must be"),
     ({"measurement_noise": [0.1]}, "faults: measurement_noise must be"),
     ({"oo_burst": 0.1}, "faults: oo_burst must be a mapping"),
@@ -490,6 +491,26 @@ def test_faults_unknown_keys_and_types():
     assert Faults().is_ideal and not f.is_ideal
     assert Faults.keys() == ["oo_period", "oo_loss", "oo_burst", "oo_delay", "co_loss", "co_delay", "switching",
                              "measurement_noise"]
+
+
+def test_switching_rate_and_edge_cases():
+    """``rate``: stay with probability ``exp(-rate T)``, else a uniform jump to another graph; a network
+    without any link (every graph empty) runs: no links, no consensus term."""
+    prm, state, _ = _ne2()
+    ring = ne2().graph.adjacency
+    sw = Faults(switching={"graphs": [ring, np.zeros((6, 6)), ring], "rate": 4.0}).switching
+    T = prm.control_period
+    P = sw.transition_matrix(T)
+    np.testing.assert_allclose(np.diag(P), np.exp(-4.0 * T), rtol=1e-15)
+    np.testing.assert_allclose(P[0, 1:], (1 - np.exp(-4.0 * T)) / 2, rtol=1e-12)
+    np.testing.assert_allclose(P.sum(axis=1), 1.0, rtol=1e-15)
+    fa = fault_args(Faults(switching={"graphs": [np.zeros((6, 6))]}, oo_loss=0.5), prm)
+    assert fa.sender.shape == (0,)
+    fs = init_fault_state(prm, fa, state[0], state[1], [1, 2])
+    u = np.zeros((2, prm.n_inputs))
+    st, fs = _run_faulted(prm, state, fa, fs, 2, u, u)
+    assert all(np.all(np.isfinite(a)) for a in st)
+    np.testing.assert_array_equal(st[2], state[2])  # no disagreement: the gains do not move (sigma = 0)
 
 
 def test_oo_period_must_be_a_multiple_of_dt():
