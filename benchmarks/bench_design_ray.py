@@ -9,8 +9,10 @@ Usage::
     One seeded random network from the project's generator
     (:func:`dobs_envs.scenarios.random.random_plant_scenario` with ``n_states``, ``n_observers`` =
     ``--states``, ``--nodes`` and the ``random_network`` env's other defaults: 3 channels, each node
-    knows 1-2, selection outputs; ``verify=False``, since verifying builds the serial design, which
-    is timed here instead). Designed with ``design_distributed_observer`` (the arguments
+    knows 1-2, selection outputs), verified as the env's are (``verify=True``: the generator builds the
+    design once, serially, and redraws from the same stream a candidate that fails, e.g. a node whose
+    Lemma 2 is too ill-conditioned; seed 0 at N = 1000, n = 60 has such a node in its first draw).
+    Generation time includes that first design. Designed with ``design_distributed_observer`` (the arguments
     ``Scenario.design`` passes) three ways, one after the other:
 
     1. ``backend="serial"``, per-node durations recorded by wrapping
@@ -170,15 +172,15 @@ def run_design(N: int, n: int, seed: int, one_cpu: bool) -> dict:
     from dobs_envs.design import design_distributed_observer
     from dobs_envs.scenarios.random import random_plant_scenario
 
-    print(f"== design: random_plant_scenario(n_states={n}, n_observers={N}, seed={seed}, verify=False); "
+    print(f"== design: random_plant_scenario(n_states={n}, n_observers={N}, seed={seed}); "
           f"load {_load()}", flush=True)
     t0 = time.perf_counter()
-    sc = random_plant_scenario(n_states=n, n_observers=N, seed=seed, verify=False)
+    sc = random_plant_scenario(n_states=n, n_observers=N, seed=seed)
     gen = time.perf_counter() - t0
     args = (sc.A, sc.channels, sc.C, sc.known, sc.graph)
     kw = {"B_v": sc.B_v if sc.B_v.shape[1] else None}
     p_i = [c.shape[0] for c in sc.C]
-    print(f"  generated in {gen:.2f} s: n={n}, N={N}, {len(sc.channels)} channels, p_i in [{min(p_i)}, {max(p_i)}], "
+    print(f"  generated and verified (draw {sc.metadata['attempt']}) in {gen:.2f} s: n={n}, N={N}, {len(sc.channels)} channels, p_i in [{min(p_i)}, {max(p_i)}], "
           f"{int(sc.graph.adjacency.sum() // 2)} O-O edges", flush=True)
 
     # warm-up (first calls load scipy's LAPACK wrappers and fill caches), not timed
@@ -202,11 +204,12 @@ def run_design(N: int, n: int, seed: int, one_cpu: bool) -> dict:
     S = t_serial - sum(durations)
     delta = serial.delta
     out = {"network": {"generator": "dobs_envs.scenarios.random.random_plant_scenario", "n_states": n,
-                       "n_observers": N, "seed": seed, "verify": False, "generation_seconds": gen,
+                       "n_observers": N, "seed": seed, "verify": True, "attempt": sc.metadata["attempt"],
+                       "generation_seconds": gen,
                        "n_channels": len(sc.channels), "p_i_range": [min(p_i), max(p_i)],
                        "delta_range": [int(delta.min()), int(delta.max())], "delta_mean": float(delta.mean())},
            "serial": {"wall_seconds": t_serial, "node_durations": _stats(durations), "driver_serial_part": S,
-                      "load_avg": _load()}}
+                      "load_avg": _load(), "node_durations_seconds": list(durations)}}
     print(f"  serial: {t_serial:.2f} s (delta_i in [{delta.min()}, {delta.max()}], mean {delta.mean():.2f}); "
           f"per node {_fmt_stats(out['serial']['node_durations'])}; driver-side part S = {S:.2f} s; "
           f"load {out['serial']['load_avg']}", flush=True)
@@ -235,6 +238,8 @@ def run_design(N: int, n: int, seed: int, one_cpu: bool) -> dict:
             o1 = proj.calibrate_overhead(durations, 1, warm1, serial=S, model=m)
             pred = proj.design_wall_time(durations, 2, serial=S, overhead=o1, model=m)
             val["predicted_2cpu"][m] = {"overhead_1cpu": o1, "predicted": pred, "ratio_to_measured": pred / warm2}
+            model["table"][f"{m}, o from 1 CPU"] = {P: proj.design_wall_time(durations, P, serial=S, overhead=o1,
+                                                                             model=m) for P in CORES}
         model["validation"] = val
     cold = out["ray2"]["calls"][0]["wall_seconds"]
     model["repeat_check"] = {"cold": cold, "warm": warm2}
@@ -250,6 +255,9 @@ def run_design(N: int, n: int, seed: int, one_cpu: bool) -> dict:
           f"in the driver {model['overhead']['driver']['seconds_per_task'] * 1e3:.2f} ms; serial design "
           f"{t_serial:.2f} s; speed-up of the 2-CPU Ray call over serial {t_serial / warm2:.2f}x")
     if one_cpu:
+        t1 = model["table"]["worker, o from 1 CPU"]
+        print(f"  with the overhead fitted to the warm 1-CPU call instead (on workers): "
+              + ", ".join(f"{P} cores {t1[P]:.2f} s" for P in CORES))
         for m, v in model["validation"]["predicted_2cpu"].items():
             print(f"  validation ({m} model): calibrated on 1 CPU ({model['validation']['measured_ray_1cpu']:.2f} s, "
                   f"o = {v['overhead_1cpu'] * 1e3:.2f} ms), predicts {v['predicted']:.2f} s on 2 CPUs; "
