@@ -208,7 +208,8 @@ def normal(seed, stream, period, index) -> np.ndarray:
 
 def as_seeds(seeds, batch: int, name: str = "seeds") -> np.ndarray:
     """``(batch,)`` ``uint64`` copy of per-copy fault seeds (non-negative integers below ``2**64``)."""
-    arr = np.asarray(seeds)
+    # a list of Python ints: checked one by one (numpy would turn [1, 2**63] into float64)
+    arr = np.asarray(seeds, dtype=object) if isinstance(seeds, (list, tuple)) else np.asarray(seeds)
     if arr.ndim == 0:
         arr = np.broadcast_to(arr, (batch,))
     if arr.shape != (batch,):
