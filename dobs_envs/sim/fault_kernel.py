@@ -56,7 +56,7 @@ import numba  # noqa: E402  (a hard dependency; the numpy reference needs nothin
 _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy")
 _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
 
-__all__ = ["unpack_fault_args", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
+__all__ = ["unpack_fault_args", "delivers", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
            "control_period_faulted_compiled", "co_link_compiled", "FAULT_STATE_FIELDS"]
 
 #: the order of the fault-state tuple the kernels receive (``tuple(FaultState)``)
@@ -98,6 +98,22 @@ def _take(rec, src, sender, deliver, n):
                 rec[e, c] = src[js + c]
 
 
+@_njit_inline
+def delivers(b, e, fa, seed_a, bad_a, g, k):
+    """Whether link ``e`` of copy ``b`` delivers in period ``k`` with active graph ``g``: it is in ``g`` and
+    does not lose the period's packets (probability ``oo_loss``, or ``loss_bad``/``loss_good`` by its
+    burst state ``bad_a[b, e]``; :func:`~dobs_envs.sim.fault_state.oo_losses`)."""
+    if not fa.weight[g, e] > 0.0:
+        return False
+    if fa.burst:
+        pl = fa.loss_bad if bad_a[b, e] else fa.loss_good
+    else:
+        pl = fa.oo_loss
+    if pl > 0.0:
+        return not frng.uniform_bits(seed_a[b], _OO_LOSS, np.uint64(k), np.uint64(e)) < pl
+    return True
+
+
 @_njit
 def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, sc, fsc):
     """One faulted control period of copy ``b`` in place (module doc; shapes as
@@ -120,7 +136,6 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
     E = sender.shape[0]
     N, n = z.shape[1], z.shape[2]
     p, mv = ka.C.shape[1], ka.B_v.shape[1]
-    seed = seed_a[b]
     k = period_a[b]
     g = graph_a[b]
     rec = received_a[b]  # (E, n) held copies r_e
@@ -128,18 +143,9 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
     # the period's deliveries (fault_state.oo_losses) and the active graph
     for i in range(N):
         deg[i] = fa.degree[g, i]
-    ku = np.uint64(k)
     for e in range(E):
-        we = fa.weight[g, e]
-        wl[e] = we
-        if fa.burst:
-            pl = fa.loss_bad if bad_a[b, e] else fa.loss_good
-        else:
-            pl = fa.oo_loss
-        lost = False
-        if pl > 0.0:
-            lost = frng.uniform_bits(seed, _OO_LOSS, ku, np.uint64(e)) < pl
-        dl = we > 0.0 and not lost
+        wl[e] = fa.weight[g, e]
+        dl = delivers(b, e, fa, seed_a, bad_a, g, k)
         deliver[e] = dl
         delivered[b, e] = dl
     M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
