@@ -112,6 +112,13 @@ def test_compiled_matches_numpy_in_split_steps():
     state = (s.x, s.z, s.gamma, s.gamma_s, s.v, s.x_r)
     for f in (Faults(), Faults(oo_period=prm.dt), Faults(oo_loss=0.5, measurement_noise=0.1)):
         _compare(prm, state, f, 3, [4, 5, 6], u, r)
+    # in a tile (8 copies, half of them splitting: flagged lanes are recomputed copy by copy)
+    s8 = prm.initial_state(np.concatenate([300.0 * rng.normal(size=(4, 5)), rng.normal(size=(4, 5))]),
+                           z0=rng.normal(size=(8, 4, 5)), gamma0=np.repeat([400.0, 0.1], 4)[:, None])
+    u8 = rng.normal(size=(8, 3))
+    state8 = (s8.x, s8.z, s8.gamma, s8.gamma_s, s8.v, s8.x_r)
+    for f in (Faults(oo_loss=0.5, measurement_noise=0.1), Faults(oo_period=0.002, oo_delay=1)):
+        _compare(prm, state8, f, 3, np.arange(8), u8, np.zeros((8, 3)))
 
 
 def test_batch_independence_bitwise():
@@ -176,3 +183,28 @@ def test_fault_state_tuple_order():
 
     assert FAULT_STATE_FIELDS == ("seed", "period", "received", "snapshots", "bad", "graph", "noise", "co_sent",
                                   "co_held") == FaultState._fields
+
+
+@pytest.mark.parametrize("case", ["all", "delay", "burst", "switching"])
+def test_tiles_are_bitwise_the_per_copy_path(case):
+    """Tiles (140 copies: one of 128 and a remainder of 12, both SIMD) give every copy bitwise what it gets
+    advanced alone (the per-copy path), and match the numpy reference (8 copies: one tile of 8)."""
+    prm, state, rng = _ne2(B=140, seed=4)
+    u = 0.3 * rng.normal(size=(140, prm.n_inputs))
+    r = rng.normal(size=(140, prm.n_inputs))
+    fa = fault_args(Faults.from_value(CASES[case]), prm)
+    seeds = np.arange(1000, 1140)
+    fs = init_fault_state(prm, fa, state[0], state[1], seeds)
+    full = state
+    for _ in range(3):
+        *full, fs = control_period_faulted_compiled(*full, u, r, prm, fa, fs)
+    for c in (0, 77, 127, 128, 139):
+        one = tuple(a[c:c + 1] for a in state)
+        fs1 = init_fault_state(prm, fa, one[0], one[1], seeds[c:c + 1])
+        for _ in range(3):
+            *one, fs1 = control_period_faulted_compiled(*one, u[c:c + 1], r[c:c + 1], prm, fa, fs1)
+        for name, a, b in zip(("x", "z", "gamma", "gamma_s", "v", "x_r") + FaultState._fields,
+                              tuple(one) + tuple(fs1), tuple(full) + tuple(fs)):
+            np.testing.assert_array_equal(a[0], b[c], err_msg=f"{name}, copy {c}")
+    sub = tuple(a[:8] for a in state)
+    _compare(prm, sub, Faults.from_value(CASES[case]), 3, seeds[:8], u[:8], r[:8])

@@ -47,7 +47,8 @@ from ..numba_cache import ensure_fresh
 from ..packing import compiled_unpack, pack
 from . import fault_rng as frng
 from .fault_state import FaultArgs, FaultState
-from .period_kernel import FASTMATH, MAX_SPLIT, _crit, _scratch_copy, _stable_step, _terms, unpack_kernel_args
+from .period_kernel import (FASTMATH, MAX_SPLIT, MIN_TILE, TILE, TILE_RECHECK, _crit, _gather, _scratch_copy,
+                            _scratch_tile, _stable_step, _terms, _tile_dot, unpack_kernel_args)
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -321,14 +322,255 @@ def _draws_copy(b, fa, fs):
 
 
 @_njit
+def _scratch_fault_tile(fa, N, n, p, W):
+    """Per-lane fault arrays of :func:`_tile_faulted`: received copies ``REC (E, n, W)``, noise ``NZ (N, p, W)``,
+    degrees ``DEG (N, W)``, link weights ``WL (E, W)``, deliveries ``DL (E, W)``, periods ``KP (W,)``,
+    broadcast flags ``BC (W,)``; with ``oo_delay > 0`` the period's snapshots ``TSN (nb, N, n, W)``, their ring
+    slots ``TSLOT (nb, W)`` and counts ``TCNT (W,)`` (``nb`` the most broadcasts in a period)."""
+    E = fa.sender.shape[0]
+    nb = fa.substeps // fa.exchange_steps + 1 if fa.lag > 0 else 0
+    return (np.empty((E, n, W)), np.zeros((N, p, W)), np.empty((N, W)), np.empty((E, W)),
+            np.zeros((E, W), dtype=np.bool_), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.bool_),
+            np.empty((nb, N, n, W)), np.zeros((nb, W), dtype=np.int64), np.zeros(W, dtype=np.int64))
+
+
+@_njit
+def _gather_fault(ft, lo, nl, fa, fs, N, p):
+    """The fault state of copies ``lo .. lo+nl-1`` into the tile arrays ``ft`` (lanes past ``nl`` repeat the
+    last copy), with each lane's deliveries of the period (:func:`delivers`)."""
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
+    W = KP.shape[0]
+    E, n = REC.shape[0], REC.shape[1]
+    for c in range(W):
+        b = lo + (c if c < nl else nl - 1)
+        g = graph_a[b]
+        KP[c] = period_a[b]
+        TCNT[c] = 0
+        for i in range(N):
+            DEG[i, c] = fa.degree[g, i]
+            for q in range(p):
+                NZ[i, q, c] = noise_a[b, i, q]
+        for e in range(E):
+            WL[e, c] = fa.weight[g, e]
+            DL[e, c] = delivers(b, e, fa, seed_a, bad_a, g, period_a[b])
+            for k in range(n):
+                REC[e, k, c] = received_a[b, e, k]
+
+
+@_njit_inline
+def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
+    """One faulted control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place: the body of
+    :func:`~dobs_envs.sim.period_kernel._tile_body` with the faulted exchange of :func:`period_copy_faulted`
+    (per lane: deliveries, active graph's degrees and weights, held noise, broadcasts at its own Euler step
+    count). Per copy the same operations in the same order as :func:`period_copy_faulted` (a link of weight 0
+    is skipped by a select), so every unflagged lane's result is bitwise the per-copy one. Snapshots
+    (``oo_delay > 0``) are kept in the tile (``TSN``) and written into the batch's ring by
+    :func:`_scatter_faulted` for the unflagged lanes only (a flagged lane is recomputed from the ring as it
+    was); reads come from the batch's ring: no snapshot of a period is read in that period
+    (``lag >= substeps / exchange_steps``)."""
+    rows = ka.rows
+    proj_range = ka.proj_range
+    phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
+    dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
+    Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    snapshots_a = fs[3]
+    sender, receiver = fa.sender, fa.receiver
+    E = sender.shape[0]
+    N, n = Z.shape[0], Z.shape[1]
+    p, mv = ka.C.shape[1], ka.B_v.shape[1]
+    rq = ka.Q_proj.shape[2]
+    M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
+    continuous = fa.continuous
+    noisy = fa.noise_std > 0.0
+    for c in range(W):
+        FL[c] = 0.0
+    for i in range(N):
+        for k in range(n):
+            _tile_dot(BU[i, k], None, rows.B_bar, i * n + k, U, W)
+    for k in range(n):
+        _tile_dot(Bu[k], None, rows.B, k, U, W)
+        _tile_dot(Br[k], None, rows.B, k, R, W)
+    for j in range(substeps):
+        for i in range(N):
+            for q in range(p):
+                _tile_dot(Y[i, q], None, rows.C, i * p + q, X, W)
+                if noisy:
+                    for c in range(W):
+                        Y[i, q, c] = Y[i, q, c] + NZ[i, q, c]
+            for k in range(n):
+                _tile_dot(XH[i, k], Z[i, k], rows.G_bar, i * n + k, Y[i], W)
+        # broadcasts (per lane: its own Euler step count s = k S + j)
+        any_bc = False
+        for c in range(W):
+            bc = continuous or (KP[c] * substeps + j) % M == 0
+            BC[c] = bc
+            any_bc = any_bc or bc
+        if any_bc:
+            if lag > 0:
+                for c in range(W):
+                    if BC[c]:
+                        b = lo + c
+                        qb = (KP[c] * substeps + j) // M
+                        slot = qb % ring
+                        old = (qb - lag) % ring
+                        t = TCNT[c]
+                        TSLOT[t, c] = slot
+                        TCNT[c] = t + 1
+                        for i in range(N):
+                            for k in range(n):
+                                TSN[t, i, k, c] = XH[i, k, c]
+                        for e in range(E):
+                            if DL[e, c]:
+                                js = sender[e]
+                                for k in range(n):
+                                    REC[e, k, c] = snapshots_a[b, old, js, k]
+            else:
+                for e in range(E):
+                    js = sender[e]
+                    for k in range(n):
+                        for c in range(W):
+                            REC[e, k, c] = XH[js, k, c] if (BC[c] and DL[e, c]) else REC[e, k, c]
+        # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as period_copy_faulted)
+        for i in range(N):
+            for k in range(n):
+                for c in range(W):
+                    D[i, k, c] = 0.0
+        for e in range(E):
+            ir = receiver[e]
+            for k in range(n):
+                for c in range(W):
+                    a = WL[e, c]
+                    D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
+        for i in range(N):
+            for c_ in range(rq):
+                _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
+            for c in range(W):
+                nw2[c] = 0.0
+            rng_ = proj_range[i]
+            for k in range(n):
+                _tile_dot(Wv[k], None, rows.Q_proj, i * n + k, CQ, W)
+                if rng_:
+                    for c in range(W):
+                        nw2[c] = nw2[c] + Wv[k, c] * Wv[k, c]
+                else:
+                    for c in range(W):
+                        w = D[i, k, c] - Wv[k, c]
+                        Wv[k, c] = w
+                        nw2[c] = nw2[c] + w * w
+            for c in range(W):
+                nw[c] = np.sqrt(nw2[c])
+                coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
+            phi_i = phi[i]
+            for c in range(W):
+                if _crit(DEG[i, c], dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
+                    FL[c] = 1.0
+            for k in range(n):
+                for c in range(W):
+                    ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
+                _tile_dot(ZN[k], ZN[k], rows.E_bar, i * n + k, Z[i], W)
+                _tile_dot(ZN[k], ZN[k], rows.F_bar, i * n + k, Y[i], W)
+                for c in range(W):
+                    ZN[k, c] = Z[i, k, c] + dt * ZN[k, c]
+            for k in range(n):
+                for c in range(W):
+                    Z[i, k, c] = ZN[k, c]
+            sg, ph, sgs, phs = sigma[i], phi[i], sigma_s[i], phi_s[i]
+            for c in range(W):
+                g = G[i, c]
+                gs = GS[i, c]
+                G[i, c] = g + dt * (-sg * g + ph * nw2[c])
+                GS[i, c] = gs + dt * (-sgs * gs + phs * nw[c])
+        for k in range(n):
+            _tile_dot(XD[k], Bu[k], rows.A, k, X, W)
+            if mv:
+                _tile_dot(XD[k], XD[k], rows.B_v, k, V, W)
+        if has_reference:
+            for k in range(n):
+                _tile_dot(XRD[k], Br[k], rows.A_r, k, XR, W)
+            for k in range(n):
+                for c in range(W):
+                    XR[k, c] = XR[k, c] + dt * XRD[k, c]
+        for k in range(n):
+            for c in range(W):
+                X[k, c] = X[k, c] + dt * XD[k, c]
+        for jv in range(mv):
+            _tile_dot(VN[jv], None, rows.Phi_v, jv, V, W)
+        for jv in range(mv):
+            for c in range(W):
+                V[jv, c] = VN[jv, c]
+
+
+@_njit
+def _tile_faulted_any(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
+    """:func:`_tile_faulted` with the width ``W`` known at run time (one compilation for every width)."""
+    _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo)
+
+
+@_njit
+def _scatter_faulted(state, ft, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, ka, fa, fs, delivered, sc, fsc):
+    """Copies ``lo .. lo+nl-1`` and their received copies back from the tile, except lanes flagged by the
+    stability test: those are advanced again from their unchanged batch rows by :func:`period_copy_faulted`."""
+    X, Z, G, GS, V, XR, U, R = state
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    received_a, snapshots_a = fs[2], fs[3]
+    N, n = Z.shape[0], Z.shape[1]
+    E = REC.shape[0]
+    for c in range(nl):
+        b = lo + c
+        if FL[c] != 0.0:
+            period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, sc, fsc)
+            continue
+        for k in range(n):
+            x[b, k] = X[k, c]
+            x_r[b, k] = XR[k, c]
+        for i in range(N):
+            gamma[b, i] = G[i, c]
+            gamma_s[b, i] = GS[i, c]
+            for k in range(n):
+                z[b, i, k] = Z[i, k, c]
+        for j in range(V.shape[0]):
+            v[b, j] = V[j, c]
+        for e in range(E):
+            delivered[b, e] = DL[e, c]
+            for k in range(n):
+                received_a[b, e, k] = REC[e, k, c]
+        for t in range(TCNT[c]):
+            sl = TSLOT[t, c]
+            for i in range(N):
+                for k in range(n):
+                    snapshots_a[b, sl, i, k] = TSN[t, i, k, c]
+
+
+@_njit
 def advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, lo, hi):
-    """One faulted control period of copies ``lo .. hi-1`` in place, copy by copy, then each copy's
-    next-period draws (module doc). Threads may run disjoint ranges concurrently (no GIL)."""
+    """One faulted control period of copies ``lo .. hi-1`` in place, then each copy's next-period draws
+    (module doc): tiles of :data:`~dobs_envs.sim.period_kernel.TILE` copies and a remainder of at least
+    :data:`~dobs_envs.sim.period_kernel.MIN_TILE` as one tile (run-time width, :func:`_tile_faulted_any`),
+    a smaller remainder copy by copy (:func:`period_copy_faulted`); the same per-copy arithmetic either way.
+    Threads may run disjoint ranges concurrently (no GIL)."""
+    N, n, p = z.shape[1], z.shape[2], ka.C.shape[1]
     sc = _scratch_copy(ka)
-    fsc = _scratch_fault(fa, z.shape[1])
-    for b in range(lo, hi):
-        period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, sc, fsc)
-        _draws_copy(b, fa, fs)
+    fsc = _scratch_fault(fa, N)
+    b = lo
+    if hi - b >= TILE:
+        st, wk = _scratch_tile(ka, TILE)
+        ft = _scratch_fault_tile(fa, N, n, p, TILE)
+    while hi - b >= MIN_TILE:
+        nl = TILE if hi - b >= TILE else hi - b
+        if nl < TILE:  # the remainder: a tile of exactly its width
+            st, wk = _scratch_tile(ka, nl)
+            ft = _scratch_fault_tile(fa, N, n, p, nl)
+        _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
+        _gather_fault(ft, b, nl, fa, fs, N, p)
+        _tile_faulted_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl, fa, ft, fs, b)
+        _scatter_faulted(st, ft, b, nl, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka, fa, fs, delivered, sc, fsc)
+        b += nl
+    for c in range(b, hi):
+        period_copy_faulted(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, sc, fsc)
+    for c in range(lo, hi):
+        _draws_copy(c, fa, fs)
 
 
 @_njit
