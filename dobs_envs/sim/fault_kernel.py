@@ -326,19 +326,21 @@ def _scratch_fault_tile(fa, N, n, p, W):
     """Per-lane fault arrays of :func:`_tile_faulted`: received copies ``REC (E, n, W)``, noise ``NZ (N, p, W)``,
     degrees ``DEG (N, W)``, link weights ``WL (E, W)``, deliveries ``DL (E, W)``, periods ``KP (W,)``,
     broadcast flags ``BC (W,)``; with ``oo_delay > 0`` the period's snapshots ``TSN (nb, N, n, W)``, their ring
-    slots ``TSLOT (nb, W)`` and counts ``TCNT (W,)`` (``nb`` the most broadcasts in a period)."""
+    slots ``TSLOT (nb, W)`` and counts ``TCNT (W,)`` (``nb`` the most broadcasts in a period); a lane mask
+    ``MK (W,)``."""
     E = fa.sender.shape[0]
     nb = fa.substeps // fa.exchange_steps + 1 if fa.lag > 0 else 0
     return (np.empty((E, n, W)), np.zeros((N, p, W)), np.empty((N, W)), np.empty((E, W)),
             np.zeros((E, W), dtype=np.bool_), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.bool_),
-            np.empty((nb, N, n, W)), np.zeros((nb, W), dtype=np.int64), np.zeros(W, dtype=np.int64))
+            np.empty((nb, N, n, W)), np.zeros((nb, W), dtype=np.int64), np.zeros(W, dtype=np.int64),
+            np.zeros(W, dtype=np.bool_))
 
 
 @_njit
 def _gather_fault(ft, lo, nl, fa, fs, N, p):
     """The fault state of copies ``lo .. lo+nl-1`` into the tile arrays ``ft`` (lanes past ``nl`` repeat the
     last copy), with each lane's deliveries of the period (:func:`delivers`)."""
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
     seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
     W = KP.shape[0]
     E, n = REC.shape[0], REC.shape[1]
@@ -374,7 +376,7 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
     phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
     dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
     Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
     snapshots_a = fs[3]
     sender, receiver = fa.sender, fa.receiver
     E = sender.shape[0]
@@ -384,6 +386,7 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
     M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
     continuous = fa.continuous
     noisy = fa.noise_std > 0.0
+    switching = fa.switching
     for c in range(W):
         FL[c] = 0.0
     for i in range(N):
@@ -429,9 +432,11 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
             else:
                 for e in range(E):
                     js = sender[e]
+                    for c in range(W):
+                        MK[c] = BC[c] & DL[e, c]  # no short-circuit: a vector select below
                     for k in range(n):
                         for c in range(W):
-                            REC[e, k, c] = XH[js, k, c] if (BC[c] and DL[e, c]) else REC[e, k, c]
+                            REC[e, k, c] = XH[js, k, c] if MK[c] else REC[e, k, c]
         # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as period_copy_faulted)
         for i in range(N):
             for k in range(n):
@@ -439,10 +444,17 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
                     D[i, k, c] = 0.0
         for e in range(E):
             ir = receiver[e]
-            for k in range(n):
-                for c in range(W):
-                    a = WL[e, c]
-                    D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
+            if switching:  # the lanes' graphs differ: a select per lane
+                for k in range(n):
+                    for c in range(W):
+                        a = WL[e, c]
+                        D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
+            else:  # one graph: the link's weight is every lane's
+                a = fa.weight[0, e]
+                if a != 0.0:
+                    for k in range(n):
+                        for c in range(W):
+                            D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c])
         for i in range(N):
             for c_ in range(rq):
                 _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
@@ -503,6 +515,14 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
 
 
 @_njit
+def _tile_faulted_const(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
+    """:func:`_tile_faulted` compiled for the constant width ``W`` (:data:`~dobs_envs.sim.period_kernel.TILE`:
+    constant trip counts, as :func:`~dobs_envs.sim.period_kernel.period_tile`)."""
+    numba.literally(W)
+    _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo)
+
+
+@_njit
 def _tile_faulted_any(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
     """:func:`_tile_faulted` with the width ``W`` known at run time (one compilation for every width)."""
     _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo)
@@ -513,7 +533,7 @@ def _scatter_faulted(state, ft, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, 
     """Copies ``lo .. lo+nl-1`` and their received copies back from the tile, except lanes flagged by the
     stability test: those are advanced again from their unchanged batch rows by :func:`period_copy_faulted`."""
     X, Z, G, GS, V, XR, U, R = state
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT = ft
+    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
     received_a, snapshots_a = fs[2], fs[3]
     N, n = Z.shape[0], Z.shape[1]
     E = REC.shape[0]
@@ -547,7 +567,8 @@ def _scatter_faulted(state, ft, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, 
 def advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, lo, hi):
     """One faulted control period of copies ``lo .. hi-1`` in place, then each copy's next-period draws
     (module doc): tiles of :data:`~dobs_envs.sim.period_kernel.TILE` copies and a remainder of at least
-    :data:`~dobs_envs.sim.period_kernel.MIN_TILE` as one tile (run-time width, :func:`_tile_faulted_any`),
+    :data:`~dobs_envs.sim.period_kernel.MIN_TILE` as one tile (constant width :func:`_tile_faulted_const`, run-time
+    width :func:`_tile_faulted_any`),
     a smaller remainder copy by copy (:func:`period_copy_faulted`); the same per-copy arithmetic either way.
     Threads may run disjoint ranges concurrently (no GIL)."""
     N, n, p = z.shape[1], z.shape[2], ka.C.shape[1]
@@ -564,7 +585,10 @@ def advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliver
             ft = _scratch_fault_tile(fa, N, n, p, nl)
         _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
         _gather_fault(ft, b, nl, fa, fs, N, p)
-        _tile_faulted_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl, fa, ft, fs, b)
+        if nl == TILE:
+            _tile_faulted_const(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, TILE, fa, ft, fs, b)
+        else:
+            _tile_faulted_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl, fa, ft, fs, b)
         _scatter_faulted(st, ft, b, nl, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka, fa, fs, delivered, sc, fsc)
         b += nl
     for c in range(b, hi):
