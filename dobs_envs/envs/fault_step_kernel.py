@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..numba_cache import ensure_fresh
-from ..sim.fault_kernel import _fields, advance_rows_faulted, co_link_row, delivers, unpack_fault_args
+from ..sim.fault_kernel import _fields, advance_rows_faulted, co_link_row, delivers, loss_key, unpack_fault_args
 from ..sim.kernel_args import StateArrays
 from ..sim.period_kernel import unpack_kernel_args
 from .features import features_row, unpack_static
@@ -108,8 +108,9 @@ def fault_row(b, st, W, fa, ff, fs, rx, fconsts, obs2, link):
     lag = ff.lag
     old = (s_ // ff.exchange_steps - lag) % ff.ring
     o = foff[1]
+    key = loss_key(seed_a, b, k)
     for e in range(E):
-        fresh = due and delivers(b, e, ff, seed_a, bad_a, graph_a[b], k)
+        fresh = due and delivers(b, e, ff, key, bad_a, graph_a[b])
         oo_rx[b, e] = fresh
         W[b, foff[3] + e] = 1.0 if fresh else 0.0
         js = sender[e]

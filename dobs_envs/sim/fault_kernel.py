@@ -57,7 +57,7 @@ import numba  # noqa: E402  (a hard dependency; the numpy reference needs nothin
 _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy")
 _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
 
-__all__ = ["unpack_fault_args", "delivers", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
+__all__ = ["unpack_fault_args", "loss_key", "delivers", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
            "control_period_faulted_compiled", "co_link_compiled", "FAULT_STATE_FIELDS"]
 
 #: the order of the fault-state tuple the kernels receive (``tuple(FaultState)``)
@@ -100,10 +100,17 @@ def _take(rec, src, sender, deliver, n):
 
 
 @_njit_inline
-def delivers(b, e, fa, seed_a, bad_a, g, k):
-    """Whether link ``e`` of copy ``b`` delivers in period ``k`` with active graph ``g``: it is in ``g`` and
-    does not lose the period's packets (probability ``oo_loss``, or ``loss_bad``/``loss_good`` by its
-    burst state ``bad_a[b, e]``; :func:`~dobs_envs.sim.fault_state.oo_losses`)."""
+def loss_key(seed_a, b, k):
+    """The :func:`~dobs_envs.sim.fault_rng.period_key` of copy ``b``'s O-O losses in period ``k``."""
+    return frng.period_key(seed_a[b], _OO_LOSS, np.uint64(k))
+
+
+@_njit_inline
+def delivers(b, e, fa, key, bad_a, g):
+    """Whether link ``e`` of copy ``b`` delivers in the period of the loss key ``key`` (:func:`loss_key`)
+    with active graph ``g``: it is in ``g`` and does not lose the period's packets (probability
+    ``oo_loss``, or ``loss_bad``/``loss_good`` by its burst state ``bad_a[b, e]``;
+    :func:`~dobs_envs.sim.fault_state.oo_losses`)."""
     if not fa.weight[g, e] > 0.0:
         return False
     if fa.burst:
@@ -111,7 +118,7 @@ def delivers(b, e, fa, seed_a, bad_a, g, k):
     else:
         pl = fa.oo_loss
     if pl > 0.0:
-        return not frng.uniform_bits(seed_a[b], _OO_LOSS, np.uint64(k), np.uint64(e)) < pl
+        return not frng.uniform_at(key, np.uint64(e)) < pl
     return True
 
 
@@ -144,9 +151,10 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
     # the period's deliveries (fault_state.oo_losses) and the active graph
     for i in range(N):
         deg[i] = fa.degree[g, i]
+    key = loss_key(seed_a, b, k)
     for e in range(E):
         wl[e] = fa.weight[g, e]
-        dl = delivers(b, e, fa, seed_a, bad_a, g, k)
+        dl = delivers(b, e, fa, key, bad_a, g)
         deliver[e] = dl
         delivered[b, e] = dl
     M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
@@ -293,7 +301,7 @@ def _draws_copy(b, fa, fs):
         g = graph_a[b]
         cum = fa.cum_transition[g]
         G = cum.shape[0]
-        thr = frng.uniform_bits(seed, _SWITCHING, ku, _U0) * cum[G - 1]
+        thr = frng.uniform_at(frng.period_key(seed, _SWITCHING, ku), _U0) * cum[G - 1]
         nxt = 0
         for c in range(G):
             if cum[c] <= thr:
@@ -304,8 +312,9 @@ def _draws_copy(b, fa, fs):
         graph_a[b] = 0
     E = fa.sender.shape[0]
     if fa.burst:
+        key = frng.period_key(seed, _OO_BURST, ku)
         for e in range(E):
-            uu = frng.uniform_bits(seed, _OO_BURST, ku, np.uint64(e))
+            uu = frng.uniform_at(key, np.uint64(e))
             if bad_a[b, e]:
                 bad_a[b, e] = uu >= fa.p_bad_good  # stays bad unless it recovers
             else:
@@ -315,9 +324,10 @@ def _draws_copy(b, fa, fs):
             bad_a[b, e] = False
     if fa.noise_std > 0.0:
         N, P = fa.noise_mask.shape
+        key = frng.period_key(seed, _NOISE, ku)
         for i in range(N):
             for q in range(P):
-                zq = frng.normal_bits(seed, _NOISE, ku, np.uint64(i * P + q))
+                zq = frng.normal_at(key, np.uint64(i * P + q))
                 noise_a[b, i, q] = fa.noise_std * zq * fa.noise_mask[i, q]
 
 
@@ -349,13 +359,14 @@ def _gather_fault(ft, lo, nl, fa, fs, N, p):
         g = graph_a[b]
         KP[c] = period_a[b]
         TCNT[c] = 0
+        key = loss_key(seed_a, b, period_a[b])
         for i in range(N):
             DEG[i, c] = fa.degree[g, i]
             for q in range(p):
                 NZ[i, q, c] = noise_a[b, i, q]
         for e in range(E):
             WL[e, c] = fa.weight[g, e]
-            DL[e, c] = delivers(b, e, fa, seed_a, bad_a, g, period_a[b])
+            DL[e, c] = delivers(b, e, fa, key, bad_a, g)
             for k in range(n):
                 REC[e, k, c] = received_a[b, e, k]
 
@@ -610,14 +621,14 @@ def co_link_row(b, xhat, co_nodes, fa, fs, received):
     slot = k % Lc
     src = (k - fa.co_delay) % Lc
     n = co_held.shape[2]
-    ku = np.uint64(k)
+    key = frng.period_key(seed_a[b], _CO_LOSS, np.uint64(k))
     for l in range(co_nodes.shape[0]):
         i = co_nodes[l] * n
         for c in range(n):
             co_sent[b, slot, l, c] = xhat[i + c]
         lost = False
         if fa.co_loss > 0.0:
-            lost = frng.uniform_bits(seed_a[b], _CO_LOSS, ku, np.uint64(l)) < fa.co_loss
+            lost = frng.uniform_at(key, np.uint64(l)) < fa.co_loss
         received[b, l] = not lost
         if not lost:
             for c in range(n):
