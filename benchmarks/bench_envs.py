@@ -1,7 +1,7 @@
 """Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and today's main.
 
 Usage: python benchmarks/bench_envs.py [--main /work/main] [--repeats 7] [--seconds 0.4] [--no-main]
-       [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024]
+       [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024] [--faults lossy|none|JSON]
 
 Everything is measured side by side in one run, interleaved (config A, B, C, ..., A, B, C,
 ...), best of ``--repeats`` short runs of about ``--seconds`` each (the machines are shared
@@ -15,7 +15,11 @@ with training runs: only ratios measured this way mean anything):
 - the same single envs of another checkout (``--main``, default ``/work/main``: today's
   main) in a worker process started with that checkout first on ``sys.path`` (and its own
   numba cache directory, so nothing is written into it), timed in the same interleaved loop,
-  and that checkout's serial vector env at the largest ``--batches`` size.
+  and that checkout's serial vector env at the largest ``--batches`` size;
+- communication faults (issue 23): the vector env at the largest ``--batches`` size with the option
+  ``faults=`` (``--faults``: ``lossy``, the default, is ``tracking_lossy_v0``'s setting; a JSON dict;
+  ``none`` skips it), serial and threaded, and its ratio to the same env without faults (target
+  >= 0.7x).
 
 It also reports the floating-point operations of one control step (simulation kernel +
 features/reward, counted from the kernels' loops) and the fraction of the 2-core FMA peak the
@@ -134,6 +138,8 @@ def main(argv=None):
     ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
     ap.add_argument("--batches", default="1,64,1024")
     ap.add_argument("--env-id", default=ENV_ID, help="registered Gymnasium id of the env to time")
+    ap.add_argument("--faults", default="lossy", help="fault setting of the faulted vector env: 'lossy' "
+                    "(tracking_lossy_v0's), 'none' (not timed) or a JSON dict of faults keys")
     args = ap.parse_args(argv)
     env_id = args.env_id
 
@@ -172,15 +178,21 @@ def main(argv=None):
             penv.step(ppool[k % POOL])
         return n / (time.perf_counter() - t0)
 
+    from dobs_envs.envs.tracking import TRACKING_LOSSY_FAULTS
+
+    faults = None if args.faults == "none" else (dict(TRACKING_LOSSY_FAULTS) if args.faults == "lossy"
+                                                 else json.loads(args.faults))
     batches = [int(b) for b in args.batches.split(",")]
     vec = {}
-    for B in batches:
-        for par in (False, True):
-            v = gym.make_vec(env_id, num_envs=B, threads=None if par else 1)
-            v.reset(seed=0)
-            acts = [v.action_space.low + (v.action_space.high - v.action_space.low)
-                    * rng.random(v.action_space.shape).astype(np.float32) for _ in range(8)]
-            vec[(B, par)] = (v, acts)
+    keys = [(B, par, None) for B in batches for par in (False, True)]
+    if faults is not None:
+        keys += [(batches[-1], par, "faults") for par in (False, True)]
+    for B, par, f in keys:
+        v = gym.make_vec(env_id, num_envs=B, threads=None if par else 1, **({} if f is None else {"faults": faults}))
+        v.reset(seed=0)
+        acts = [v.action_space.low + (v.action_space.high - v.action_space.low)
+                * rng.random(v.action_space.shape).astype(np.float32) for _ in range(8)]
+        vec[(B, par, f)] = (v, acts)
 
     def run_vec(key, n):
         v, acts = vec[key]
@@ -195,7 +207,7 @@ def main(argv=None):
         configs["gym single (main)"] = ("gym", "main")
         configs["PettingZoo single (main)"] = ("pz", "main")
     for key in vec:
-        configs[f"vector B={key[0]}{' threads' if key[1] else ''}"] = ("vec", key)
+        configs[f"vector B={key[0]}{' threads' if key[1] else ''}{' faults' if key[2] else ''}"] = ("vec", key)
     if worker is not None:
         configs[f"vector B={batches[-1]} (main)"] = (f"vec{batches[-1]}", "main")
 
@@ -225,7 +237,7 @@ def main(argv=None):
         worker.close()
 
     # ---------------------------------------------------------------- report
-    core = vec[(batches[-1], False)][0].core
+    core = vec[(batches[-1], False, None)][0].core
     flops = flops_per_period(core.params) + flops_per_row(core)
     peak, peak_desc = peak_flops()
     single = best["gym single (this checkout)"]
@@ -240,13 +252,19 @@ def main(argv=None):
               f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (main)']:.2f}x; "
               f"vector B={batches[-1]} (serial) vs main: "
               f"{best[f'vector B={batches[-1]}'] / best[f'vector B={batches[-1]} (main)']:.2f}x")
-    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}") and not k.endswith("(main)")),
+    if faults is not None:
+        Bm = batches[-1]
+        print(f"faults {json.dumps(faults)} vs none, vector B={Bm}: serial "
+              f"{best[f'vector B={Bm} faults'] / best[f'vector B={Bm}']:.2f}x, threads "
+              f"{best[f'vector B={Bm} threads faults'] / best[f'vector B={Bm} threads']:.2f}x (target >= 0.7x)")
+    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}") and not k.endswith("(main)")
+               and "faults" not in k),
               key=lambda k: best[k])
     print(f"best B={batches[-1]}: {top} = {best[top] / single:.1f}x the gym single env (target >= 8x)")
     print(f"flops per control step: {flops:,} ({flops_per_period(core.params):,} simulation + "
           f"{flops_per_row(core):,} features/reward)")
     for name in configs:
-        if name.startswith(f"vector B={batches[-1]}") and not name.endswith("(main)"):
+        if name.startswith(f"vector B={batches[-1]}") and not name.endswith("(main)") and "faults" not in name:
             print(f"{name}: {best[name] * flops / 1e9:.1f} GFLOP/s = {best[name] * flops / peak:.1%} of the peak "
                   f"{peak / 1e9:.0f} GFLOP/s ({peak_desc})")
 

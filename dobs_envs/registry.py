@@ -74,6 +74,9 @@ def _entries(*entries: EnvEntry) -> dict:
 ENVIRONMENTS = _entries(
     EnvEntry("tracking", "dobs_envs.tracking_v0", "dobs_envs.envs.tracking:TrackingEnv",
              "dobs_envs/Tracking-v0", 20.0, "NE2 (dobs_envs.scenarios.paper.ne2)"),
+    EnvEntry("tracking_lossy", "dobs_envs.tracking_lossy_v0", "dobs_envs.envs.tracking:TrackingLossyEnv",
+             "dobs_envs/TrackingLossy-v0", 20.0,
+             "NE2 with communication faults and sensor noise (dobs_envs.envs.tracking.TRACKING_LOSSY_FAULTS)"),
     EnvEntry("disturbance_rejection", "dobs_envs.disturbance_rejection_v0",
              "dobs_envs.envs.disturbance:DisturbanceRejectionEnv",
              "dobs_envs/DisturbanceRejection-v0", 20.0, "NE3 (dobs_envs.scenarios.paper.ne3)"),

@@ -16,6 +16,16 @@ the two are tested against each other (``tests/test_rollout.py``).
 
 Time-varying signals (reference command ``r(t)``, NE1's prescribed inputs) are evaluated
 once on the grid ``t_k = k dt`` before the loop.
+
+Communication faults (``faults=``, :mod:`dobs_envs.sim.faults`; issue 23): the control period of
+these runs is the Euler step ``dt``, so the fault model's periods are Euler steps (``oo_loss``,
+``co_loss`` drawn per step and link, ``oo_delay``/``co_delay`` in Euler steps, the graph chain and
+the measurement noise stepped/redrawn every step; ``oo_period`` a multiple of ``dt`` as everywhere).
+Per step and copy: the nodes' estimates with the held measurement noise, the C-O links
+(:func:`dobs_envs.sim.fault_kernel.co_link_row`; not at ``t = 0``, where every controller holds the
+initial estimate), the law applied to the estimates the controllers hold, then one faulted Euler
+step (:func:`dobs_envs.sim.fault_kernel.advance_rows_faulted`). Each copy's faults are drawn from its
+own seed (``fault_seed``). Reference: :func:`rollout_reference` with the same ``faults``.
 """
 from __future__ import annotations
 
@@ -28,12 +38,17 @@ import numpy as np
 from .control import paper_policy
 from .control.law_kernel import law_arrays, law_copy
 from .numba_cache import ensure_fresh
+from .packing import pack
 from .sim import estimates, step_env
+from .sim.fault_kernel import _fields, advance_rows_faulted, co_link_row, unpack_fault_args
+from .sim.fault_state import co_link_numpy, fault_args, faulted_estimates, init_fault_state
+from .sim.faults import Faults
+from .sim.numpy_step import control_period_faulted_numpy
 from .sim.period_kernel import advance_rows, unpack_kernel_args
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
-__all__ = ["Trajectory", "rollout", "rollout_reference", "window_stats"]
+__all__ = ["Trajectory", "rollout", "rollout_reference", "window_stats", "fault_seeds"]
 
 
 @dataclass(frozen=True)
@@ -173,8 +188,106 @@ def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
             advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, Bsz)
 
 
+@numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+def _rollout_kernel_faulted(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec, FF, FI, fs, co_nodes):
+    """:func:`_rollout_kernel` with communication faults (module doc): the estimates carry the held
+    measurement noise, the law reads the estimates the controllers hold after the C-O links (node
+    ``co_nodes[l]``'s row replaced by link ``l``'s held estimate), the Euler steps are faulted."""
+    ka = unpack_kernel_args(KF, KI)
+    ff = unpack_fault_args(FF, FI)
+    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
+    C, G_bar = ka.C, ka.G_bar
+    oracle, eps, phi_beta, decay, gain = loop.oracle, loop.eps, loop.phi_beta, loop.decay, loop.gain
+    cmd, ref, steps, stride = loop.cmd, loop.ref, loop.steps, loop.stride
+    Bsz, N, n = z.shape[0], z.shape[1], z.shape[2]
+    m = law.K.shape[0]
+    p = C.shape[1]
+    K = co_nodes.shape[0]
+    xhat = np.empty((N, n))
+    xl = np.empty((N, n))
+    y = np.empty(p)
+    u = np.zeros((Bsz, m))
+    r = np.zeros((Bsz, m))
+    w = np.empty(m)
+    co_rx = np.ones((Bsz, K), dtype=np.bool_)
+    delivered = np.empty((Bsz, ff.sender.shape[0]), dtype=np.bool_)
+    s = 0
+    for k in range(steps + 1):
+        record = k % stride == 0
+        for b in range(Bsz):
+            xb = x[b]
+            # eq. (localmeasure) with the held noise, eq. (hatxieq)
+            for i in range(N):
+                for q in range(p):
+                    acc = 0.0
+                    for c in range(n):
+                        acc += C[i, q, c] * xb[c]
+                    y[q] = acc + noise_a[b, i, q]
+                for c in range(n):
+                    acc = z[b, i, c]
+                    for q in range(p):
+                        acc += G_bar[i, c, q] * y[q]
+                    xhat[i, c] = acc
+            if k > 0:
+                co_link_row(b, xhat.reshape(N * n), co_nodes, ff, fs, co_rx)
+            for i in range(N):
+                for c in range(n):
+                    xl[i, c] = xhat[i, c]
+            for l in range(K):
+                for c in range(n):
+                    xl[co_nodes[l], c] = co_held_a[b, l, c]
+            if record:
+                rec.x[b, s] = xb
+                rec.x_r[b, s] = x_r[b]
+                for i in range(N):
+                    e2 = 0.0
+                    for c in range(n):
+                        d = xhat[i, c] - xb[c]
+                        e2 += d * d
+                    rec.est_err[b, s, i] = np.sqrt(e2)
+                rec.gamma[b, s] = gamma[b]
+                rec.gamma_s[b, s] = gamma_s[b]
+                rec.beta[b, s] = beta[b]
+            if k < steps:
+                law_copy(law, xl, xb, oracle, ref[k], cmd[k], beta[b], eps[b], phi_beta[b], decay, gain, u[b], w)
+                for j in range(m):
+                    r[b, j] = ref[k, j]
+            if record:
+                rec.u[b, s] = u[b]
+        if record:
+            s += 1
+        if k < steps:
+            advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, ff, fs, delivered, 0, Bsz)
+
+
+def fault_seeds(seed, batch: int) -> np.ndarray:
+    """``(batch,)`` uint64 fault seeds of the copies of a rollout: ``numpy.random.SeedSequence(seed)``'s
+    first ``batch`` 64-bit words (``seed`` a non-negative int), or ``seed`` itself as one per copy."""
+    arr = np.asarray(seed)
+    if arr.ndim == 1:
+        from .sim.fault_rng import as_seeds
+
+        return as_seeds(list(seed), batch, "fault_seed")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"fault_seed must be a non-negative int or one per copy, got {seed!r}")
+    return np.random.SeedSequence(int(seed)).generate_state(batch, dtype=np.uint64)
+
+
+def _fault_setup(sc, params, faults, state, seeds):
+    """``(FaultArgs, FaultState, co_nodes)`` of a faulted rollout (ValueError naming ``faults`` where the
+    controllers share observer nodes: one held estimate per node row of the law)."""
+    fa = fault_args(faults, params)
+    co_nodes = np.asarray(sc.links, dtype=np.int64)
+    if np.unique(co_nodes).size != co_nodes.size:
+        raise ValueError(f"faults: rollout needs one observer node per controller (the law reads node rows), "
+                         f"got links {list(sc.links)}")
+    fs = init_fault_state(params, fa, state.x, state.z, seeds, co_nodes=co_nodes)
+    return fa, fs, co_nodes
+
+
 def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: int = 1, epsilon=None,
-            phi_beta=None, oracle: bool = False, record_every: int = 1) -> list[Trajectory]:
+            phi_beta=None, oracle: bool = False, record_every: int = 1, faults=None,
+            fault_seed=0) -> list[Trajectory]:
     """Compiled closed-loop runs of ``batch`` copies of scenario ``sc`` with its paper controller.
 
     Parameters
@@ -193,12 +306,18 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
         Apply the control law to the true state ``x`` instead of the linked estimates.
     record_every : int
         Record every ``record_every``-th Euler step (and the last one if it falls on the grid).
+    faults : dict or Faults, optional
+        Communication faults (module doc; periods are Euler steps here); None: the ideal network.
+    fault_seed : int or array_like (B,)
+        The copies' fault seeds (:func:`fault_seeds`).
 
     Returns
     -------
     list of Trajectory
-        One per copy, sampled at ``t = k * record_every * dt``.
+        One per copy, sampled at ``t = k * record_every * dt`` (``est_err``: of the nodes' own,
+        noisy-measurement estimates).
     """
+    faults = Faults.from_value(faults)
     dt, t_end, steps = _steps(sc, dt, t_end)
     batch, stride = int(batch), int(record_every)
     if batch < 1:
@@ -226,7 +345,13 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
                     beta=np.empty((batch, R, Nc)))
     x, z, g, gs, v, xr = (np.array(a, dtype=float, order="C") for a in
                           (state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r))
-    _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec)
+    if faults is None:
+        _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec)
+    else:
+        fa, fs, co_nodes = _fault_setup(sc, params, faults, state, fault_seeds(fault_seed, batch))
+        fst = tuple(np.array(a, copy=True, order="C") for a in fs)
+        _rollout_kernel_faulted(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec, *pack(fa), fst,
+                                co_nodes)
     if steps % stride == 0 and R > 1:
         rec.u[:, -1] = rec.u[:, -2]
     t = np.arange(R) * (dt * stride)
@@ -237,16 +362,23 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
 
 
 def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None, oracle: bool = False,
-                      backend: str = "numpy", progress: bool = False) -> Trajectory:
+                      backend: str = "numpy", progress: bool = False, faults=None, fault_seed=0) -> Trajectory:
     """Reference implementation of :func:`rollout` (one copy, the scenario's own gains).
 
     A Python loop: per Euler step :func:`~dobs_envs.sim.estimates`, the controller's ``act``
     (numpy) and :func:`~dobs_envs.sim.step_env` with the given ``backend`` (``"numpy"``: the
-    reference step, ``"numba"``: the compiled step).
+    reference step, ``"numba"``: the compiled step). With ``faults``: the noisy estimates
+    (:func:`~dobs_envs.sim.fault_state.faulted_estimates`), the C-O links
+    (:func:`~dobs_envs.sim.fault_state.co_link_numpy`) and
+    :func:`~dobs_envs.sim.numpy_step.control_period_faulted_numpy` (``backend`` ignored); the copy's
+    fault seed is ``fault_seeds(fault_seed, 1)``.
     """
+    faults = Faults.from_value(faults)
     dt, t_end, steps = _steps(sc, dt, t_end)
     params = sc.sim_params(dt=dt, substeps=1)
     state = sc.initial_state(params)
+    if faults is not None:
+        fa, fs, co_nodes = _fault_setup(sc, params, faults, state, fault_seeds(fault_seed, 1))
     ctrl = paper_policy(sc)
     cstate = ctrl.initial_state(1)
     n, N, m = params.n_states, params.n_nodes, params.n_inputs
@@ -260,7 +392,12 @@ def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None
         from tqdm.auto import tqdm
         it = tqdm(it, desc=sc.name, unit="step", mininterval=0.5, leave=False)
     for k in it:
-        xhat = estimates(state, params)
+        if faults is None:
+            xhat = estimates(state, params)
+        else:
+            xhat = faulted_estimates(state.x, state.z, params, fs)
+            if k > 0:
+                _, fs = co_link_numpy(xhat[:, co_nodes], fs, fa)
         xs[k] = state.x[0]; xrs[k] = state.x_r[0]
         ee[k] = np.linalg.norm(xhat[0] - state.x[0], axis=-1)
         gs[k] = state.gamma[0]; gss[k] = state.gamma_s[0]
@@ -269,11 +406,20 @@ def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None
         if k == steps:
             break
         t = np.array([k * dt])
+        if faults is not None:
+            xhat = xhat.copy()
+            xhat[:, co_nodes] = fs.co_held  # what the controllers hold
         src = np.broadcast_to(state.x[:, None, :], xhat.shape) if oracle else xhat
         u, cstate = ctrl.act(src, t, cstate, dt)
         us[k] = u[0]
         r = np.zeros((1, m)) if sc.reference is None else sc.reference(t)
-        state = step_env(state, u, params, r, backend=backend, validate=False)
+        if faults is None:
+            state = step_env(state, u, params, r, backend=backend, validate=False)
+        else:
+            *new, fs = control_period_faulted_numpy(state.x, state.z, state.gamma, state.gamma_s, state.v,
+                                                    state.x_r, u, r, params, fa, fs)
+            state = state.replace(t=state.t + dt, x=new[0], z=new[1], gamma=new[2], gamma_s=new[3], v=new[4],
+                                  x_r=new[5])
     us[-1] = us[-2] if T > 1 else us[-1]
     return Trajectory(t=np.arange(T) * dt, x=xs, x_r=xrs if sc.reference is not None else None,
                       est_err=ee, gamma=gs, gamma_s=gss, u=us, beta=bs)

@@ -7,10 +7,10 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test
 
 import dobs_envs
-from dobs_envs import disturbance_rejection_v0, hetero_mas_v0, random_network_v0, tracking_v0
+from dobs_envs import disturbance_rejection_v0, hetero_mas_v0, random_network_v0, tracking_lossy_v0, tracking_v0
 
-MODULES = [tracking_v0, disturbance_rejection_v0, hetero_mas_v0, random_network_v0]
-IDS = ["tracking_v0", "disturbance_rejection_v0", "hetero_mas_v0", "random_network_v0"]
+MODULES = [tracking_v0, tracking_lossy_v0, disturbance_rejection_v0, hetero_mas_v0, random_network_v0]
+IDS = ["tracking_v0", "tracking_lossy_v0", "disturbance_rejection_v0", "hetero_mas_v0", "random_network_v0"]
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=IDS)

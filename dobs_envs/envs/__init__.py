@@ -1,7 +1,8 @@
 """PettingZoo parallel environments and their centralised Gymnasium views.
 
 - :class:`DObsParallelEnv` / :func:`make_parallel_env`: any Scenario (or YAML/JSON file);
-- :class:`TrackingEnv` (``tracking_v0``), :class:`DisturbanceRejectionEnv`
+- :class:`TrackingEnv` (``tracking_v0``), :class:`TrackingLossyEnv` (``tracking_lossy_v0``),
+  :class:`DisturbanceRejectionEnv`
   (``disturbance_rejection_v0``), :class:`HeteroMASEnv` (``hetero_mas_v0``),
   :class:`RandomNetworkEnv` (``random_network_v0``);
 - :class:`CentralizedEnv` / :func:`make_gym_env`: one agent, concatenated
@@ -17,9 +18,9 @@ from .disturbance import DisturbanceRejectionEnv
 from .hetero_mas import HeteroMASEnv
 from .random_network import RandomNetworkEnv
 from .options import EnvOptions, HeteroMASOptions, RandomNetworkOptions
-from .tracking import TrackingEnv
+from .tracking import TrackingEnv, TrackingLossyEnv
 from .vector import DObsVectorEnv
 
 __all__ = ["DObsParallelEnv", "make_parallel_env", "COMMON_OPTIONS", "CentralizedEnv", "make_gym_env",
-           "TrackingEnv", "DisturbanceRejectionEnv", "HeteroMASEnv", "RandomNetworkEnv", "DObsVectorEnv", "EnvCore",
+           "TrackingEnv", "TrackingLossyEnv", "DisturbanceRejectionEnv", "HeteroMASEnv", "RandomNetworkEnv", "DObsVectorEnv", "EnvCore",
            "StepResult", "REASONS", "EnvOptions", "HeteroMASOptions", "RandomNetworkOptions"]

@@ -30,7 +30,11 @@ The spaces of the two views (one per agent, :func:`agent_spaces`; one centralise
 Per-agent infos (the agent's linked observer node ``i = links[k]``): ``estimation_error``,
 ``tracking_error``, ``gamma``, ``gamma_s`` and the task error if the task has one; per-copy
 (centralised) infos: ``tracking_error``, ``estimation_errors (N,)``, ``gamma (N,)``,
-``gamma_s (N,)`` and the task error. Every value is read from the core when the method is called.
+``gamma_s (N,)`` and the task error. With communication faults (option ``faults``) also, per agent,
+``co_received`` (bool: its C-O packet arrived at this boundary, else its ``xhat`` is stale) and
+``oo_received_fraction`` (float: the fraction of the O-O links into its node whose value arrived at
+this boundary, 1 for a node without links); per copy the same as ``(K,)`` arrays. Every value is read
+from the core when the method is called.
 """
 from __future__ import annotations
 
@@ -123,6 +127,13 @@ class CoreAdapter:
             return [extra] * c.num_envs
         return [{key: t, **extra} for t in c.task_errors().tolist()]
 
+    def _fault_infos(self):
+        """``(co_received (B, K) bool, oo_received_fraction (B, K))`` or None without faults."""
+        c = self.core
+        if c.faults is None:
+            return None
+        return c.co_received, c.oo_received_fraction
+
     def agent_infos(self, into: list | None = None, **extra) -> list[dict]:
         """One info per (copy, agent), copy-major (``B * K`` dicts): ``estimation_error``,
         ``tracking_error``, ``gamma``, ``gamma_s`` of the agent's linked node, the task error if
@@ -131,16 +142,24 @@ class CoreAdapter:
         te = c.tracking_errors.tolist()
         ee, g, gs = c.estimation_errors.tolist(), c.gamma.tolist(), c.gamma_s.tolist()
         tails, links = self._tails(extra), c.links
-        if into is None:
-            return [{"estimation_error": eb[i], "tracking_error": tb, "gamma": gb[i], "gamma_s": gsb[i], **tail}
-                    for eb, tb, gb, gsb, tail in zip(ee, te, g, gs, tails) for i in links]
+        fi = self._fault_infos()
         K = len(links)
-        for s, info in enumerate(into):
-            b, k = divmod(s, K)
-            i = links[k]
-            info.update(estimation_error=ee[b][i], tracking_error=te[b], gamma=g[b][i], gamma_s=gs[b][i])
-            info.update(tails[b])
-        return into
+        if into is None:
+            out = [{"estimation_error": eb[i], "tracking_error": tb, "gamma": gb[i], "gamma_s": gsb[i], **tail}
+                   for eb, tb, gb, gsb, tail in zip(ee, te, g, gs, tails) for i in links]
+        else:
+            out = into
+            for s, info in enumerate(into):
+                b, k = divmod(s, K)
+                i = links[k]
+                info.update(estimation_error=ee[b][i], tracking_error=te[b], gamma=g[b][i], gamma_s=gs[b][i])
+                info.update(tails[b])
+        if fi is not None:
+            rec, frac = fi[0].tolist(), fi[1].tolist()
+            for s, info in enumerate(out):
+                b, k = divmod(s, K)
+                info.update(co_received=rec[b][k], oo_received_fraction=frac[b][k])
+        return out
 
     def central_info(self, b: int = 0, **extra) -> dict:
         """The info of copy ``b`` (centralised): ``tracking_error`` (float), ``estimation_errors (N,)``,
@@ -150,6 +169,9 @@ class CoreAdapter:
                 "gamma": c.gamma[b].copy(), "gamma_s": c.gamma_s[b].copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = float(c.task_errors()[b])
+        fi = self._fault_infos()
+        if fi is not None:
+            info.update(co_received=fi[0][b], oo_received_fraction=fi[1][b])
         info.update(extra)
         return info
 
@@ -161,8 +183,11 @@ class CoreAdapter:
         ee, g, gs = c.estimation_errors.copy(), c.gamma.copy(), c.gamma_s.copy()
         tails = self._tails(extra)
         out = [{} for _ in te] if into is None else into
+        fi = self._fault_infos()
         for b, info in enumerate(out):
             info.update(tracking_error=te[b], estimation_errors=ee[b], gamma=g[b], gamma_s=gs[b])
+            if fi is not None:
+                info.update(co_received=fi[0][b], oo_received_fraction=fi[1][b])
             info.update(tails[b])
         return out
 
@@ -174,6 +199,9 @@ class CoreAdapter:
                 "gamma": c.gamma.copy(), "gamma_s": c.gamma_s.copy()}
         if c.task_error_key is not None:
             info[c.task_error_key] = np.array(c.task_errors(), dtype=np.float64)
+        fi = self._fault_infos()
+        if fi is not None:
+            info.update(co_received=fi[0], oo_received_fraction=fi[1])
         return info
 
     # ------------------------------------------------------------------ actions

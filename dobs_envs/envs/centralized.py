@@ -33,6 +33,7 @@ truncates by itself -- there is a single truncation mechanism):
 id                                     parallel env                  max_episode_steps
 =====================================  ============================  =================
 ``dobs_envs/Tracking-v0``              ``tracking_v0``               400 (20 s)
+``dobs_envs/TrackingLossy-v0``         ``tracking_lossy_v0``         400 (20 s)
 ``dobs_envs/DisturbanceRejection-v0``  ``disturbance_rejection_v0``  400 (20 s)
 ``dobs_envs/HeteroMAS-v0``             ``hetero_mas_v0``             600 (30 s)
 ``dobs_envs/RandomNetwork-v0``         ``random_network_v0``         400 (20 s)

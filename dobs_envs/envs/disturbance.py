@@ -101,10 +101,12 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     max_cycles=None, horizon=None, observation="local", obs_dtype="float32", Q=None,
     R=None, action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False)``
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False, faults=None)``
     (:class:`~dobs_envs.envs.options.EnvOptions`; see
     ``tracking_v0`` for the shared ones). ``scenario=`` accepts any Scenario with an unknown
     input ``B_v``.
+
+    ``faults=`` (communication faults and sensor noise) as in ``tracking_v0``.
 
     ## Version History
 
@@ -112,6 +114,7 @@ class DisturbanceRejectionEnv(DObsParallelEnv):
     * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
       observation widths differ (before: always, doubling the width; the default spaces are
       unchanged).
+    * v0, issue 23: option ``faults`` (default None: unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "disturbance_rejection_v0", "is_parallelizable": True, "render_fps": 20}

@@ -59,6 +59,8 @@ import numpy as np
 
 from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric, check_seed
 from ..sim import SimParams, SimState
+from ..packing import pack
+from ..sim.fault_state import fault_args, init_fault_state
 from ..sim.kernel_args import StateArrays
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
@@ -66,6 +68,7 @@ from .features import pack_static, write_features
 from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions
 from ..sim.period_kernel import TILE
+from .fault_step_kernel import advance_batch_faulted, advance_range_faulted, fault_features
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
                           advance_batch, advance_range, first_non_finite)
 
@@ -186,6 +189,12 @@ class EnvCore:
             K_ref=sc.K if sc.reference is not None else None)
         n, N, m = p.n_states, p.n_nodes, p.n_inputs
         self.n_states, self.n_nodes, self.n_inputs, self.n_unknown = n, N, m, m_v
+        # --- communication faults (issue 23; None: no fault code runs) -----------------------------
+        #: the ``faults`` option (a :class:`~dobs_envs.sim.faults.Faults`) or None
+        self.faults = o.faults
+        #: its constants for this system (:func:`~dobs_envs.sim.fault_state.fault_args`; ValueError naming
+        #: ``faults: oo_period`` / ``faults: switching`` where they do not fit ``dt`` or the network)
+        self._fa = fault_args(o.faults, p) if o.faults is not None else None
         self.has_reference = sc.reference is not None
         # --- agents and actions ---------------------------------------------------------------
         self.agents = tuple(f"controller_{k}" for k in range(sc.n_controllers))
@@ -217,12 +226,14 @@ class EnvCore:
         self.action_scale = _ro(bound.copy() if o.normalized_actions else np.ones(m))
         # --- observations -------------------------------------------------------------------
         self.obs_dtype = np.dtype(o.obs_dtype)
-        comps = resolve_components(o.observation, has_reference=self.has_reference, has_unknown_input=m_v > 0)
+        comps = resolve_components(o.observation, has_reference=self.has_reference, has_unknown_input=m_v > 0,
+                                   has_faults=self.faults is not None)
         p_i = [c.shape[0] for c in sc.C]
         #: option padded_observations: identical agent spaces (padding and a 0/1 mask where widths differ)
         self.padded_observations = o.padded_observations
         self.layout = L = FeatureLayout(p_i, n, m, m_v, [sc.graph.neighbors(i) for i in range(N)], self.links,
-                                        self.channel_slices, comps, padded=o.padded_observations)
+                                        self.channel_slices, comps, padded=o.padded_observations,
+                                        fault_links=None if self._fa is None else (self._fa.sender, self._fa.receiver))
         self.obs_widths, self.obs_dim = _ro(L.widths), L.obs_dim
         self._state_index, self.state_layout = L.state_index(self.has_reference)
         self.state_dim = int(self._state_index.size)
@@ -243,6 +254,14 @@ class EnvCore:
             ref[0], ref[1], ref[2] = sc.reference.amplitude, sc.reference.frequency, sc.reference.phase
         self._ka = p.kernel_packed
         self._SF, self._SI = pack_static(p.C, p.G_bar, ref, self.Q, self.R, L.offsets(p_i), L.padded_index, L.size)
+        if self.faults is not None:
+            self._FP = pack(self._fa)  # (FF, FI): the FaultArgs packed once
+            co_nodes = np.asarray(self.links, dtype=np.int64)
+            self._fconsts = (co_nodes, L.fault_offsets())
+            self._alloc_faults(self.num_envs)
+            inc = (self._fa.receiver[None, :] == co_nodes[:, None]).astype(np.float64)  # (K, E): links into node k
+            self._oo_incidence = inc / np.maximum(inc.sum(axis=1, keepdims=True), 1.0)
+            self._oo_none = inc.sum(axis=1) == 0  # nodes without links: nothing to receive (fraction 1)
         #: the step's constants by name (the compiled step gets them as the plain tuple ``_consts``)
         self._step_consts = StepConsts(
             u_lo=np.ascontiguousarray(-bound), u_hi=np.ascontiguousarray(bound), period=self.control_period,
@@ -295,6 +314,15 @@ class EnvCore:
         self._outs = (outf, outb, self._reason, self._cycles)
         self._views()
 
+    def _alloc_faults(self, B: int) -> None:
+        """The fault state of ``B`` copies (batch first, :class:`~dobs_envs.sim.fault_state.FaultState` as a
+        plain tuple, filled at reset) and the received masks ``(co_rx (B, K), oo_rx (B, E))``."""
+        p, fa = self.params, self._fa
+        fs = init_fault_state(p, fa, np.zeros((B, self.n_states)), np.zeros((B, self.n_nodes, self.n_states)),
+                              np.zeros(B, dtype=np.uint64), co_nodes=self._fconsts[0])
+        self._fs = tuple(np.array(a, copy=True, order="C") for a in fs)
+        self._rx = (np.ones((B, self.n_agents), dtype=bool), np.ones((B, fa.sender.shape[0]), dtype=bool))
+
     #: attributes that are views of the buffers (rebuilt by _views, not pickled)
     _VIEWS = ("_rew", "_cost", "_err", "_xn", "_fin", "_term", "_trunc", "observations", "estimation_errors",
               "applied_inputs", "tracking_errors", "features", "cycles", "gamma", "gamma_s", "_result", "_all_rows")
@@ -326,8 +354,8 @@ class EnvCore:
         self.__dict__.update(state)
         self._pool = None
         self._views()
-        for a in self._ka:  # read-only as built: the compiled step is specialised on it (no recompilation)
-            a.flags.writeable = False
+        for a in self._ka + (self._FP if self.faults is not None else ()):
+            a.flags.writeable = False  # read-only as built: the compiled step is specialised on it (no recompilation)
 
     # ------------------------------------------------------------------ properties
     @property
@@ -430,6 +458,8 @@ class EnvCore:
             xr0 = np.broadcast_to(sc.x_r0 if sc.x_r0 is not None else np.zeros(n), (k, n))
         X0, V0 = np.empty((k, n)), np.empty((k, m_v))
         dist, random_v = self.distribution, self.disturbance == "random"
+        faulty = self.faults is not None
+        fseeds = np.zeros(k, dtype=np.uint64)
         for j, c in enumerate(rows):
             if seeds is not None and seeds[j] is not None:
                 self._rngs[c] = np.random.default_rng(seeds[j])
@@ -438,8 +468,14 @@ class EnvCore:
             V0[j], sig = dist.disturbance_params(rng, None if v0s is None else v0s[j])
             if random_v:
                 self._sig[:, c] = sig
+            if faulty:  # the copy's fault seed, drawn last (faults=None draws exactly what it drew before)
+                fseeds[j] = rng.integers(0, 2**64, dtype=np.uint64)
         self._x[rows], self._xr[rows], self._v[rows] = X0, xr0, V0
         self._z[rows], self._g[rows], self._gs[rows], self._t[rows] = 0.0, sc.gamma0, sc.gamma_s0, 0.0
+        if faulty:
+            fs = init_fault_state(self.params, self._fa, X0, self._z[rows], fseeds, co_nodes=self._fconsts[0])
+            for dst, src in zip(self._fs, fs):
+                dst[rows] = src
         self._cycles[rows] = 0
         self._term[rows] = self._trunc[rows] = False
         self._reason[rows] = REASON_NONE
@@ -454,6 +490,9 @@ class EnvCore:
     def _write_features(self, rows) -> None:
         write_features(self._x, self._z, self._xr, self._g, self._gs, self._v, self._t, self._W, self._SF, self._SI,
                        self.has_reference, self._obs, rows, self._cost, self._err, self._xn, self._fin)
+        if self.faults is not None:
+            fault_features(rows, self._state, self._W, self._obs, self._SF, self._SI, *self._FP, self._fs, self._rx,
+                           self._fconsts)
 
     # ------------------------------------------------------------------ step
     def advance(self, u) -> StepResult:
@@ -474,8 +513,12 @@ class EnvCore:
         if u.shape != (self.num_envs, self.n_inputs):
             raise ValueError(f"u must have shape ({self.num_envs}, {self.n_inputs}) (copies, inputs), got {u.shape}")
         args = (self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI, self._consts)
+        kbatch, krange = advance_batch, advance_range
+        if self.faults is not None:
+            args += (self._FP, self._fs, self._rx, self._fconsts)
+            kbatch, krange = advance_batch_faulted, advance_range_faulted
         if len(self.ranges) == 1:
-            bad = advance_batch(*args)
+            bad = kbatch(*args)
         else:
             bad = first_non_finite(u)
             if bad < 0:
@@ -483,8 +526,8 @@ class EnvCore:
                     from concurrent.futures import ThreadPoolExecutor
 
                     self._pool = ThreadPoolExecutor(len(self.ranges) - 1, thread_name_prefix="dobs_envs_core")
-                futures = [self._pool.submit(advance_range, lo, hi, *args) for lo, hi in self.ranges[1:]]
-                advance_range(*self.ranges[0], *args)
+                futures = [self._pool.submit(krange, lo, hi, *args) for lo, hi in self.ranges[1:]]
+                krange(*self.ranges[0], *args)
                 for f in futures:
                     f.result()
         if bad >= 0:
@@ -509,9 +552,40 @@ class EnvCore:
         :func:`~dobs_envs.envs.step_kernel.advance_batch`: ``state, W, obs, outs, sig, ka, SF, SI,
         consts``), e.g. to run a kernel and its numpy reference from the core's current state."""
         cp = lambda arrs: tuple(a.copy() for a in arrs)  # noqa: E731
-        return {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
-                "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF.copy(), "SI": self._SI.copy(),
-                "consts": self._consts}
+        out = {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
+               "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF.copy(), "SI": self._SI.copy(),
+               "consts": self._consts}
+        if self.faults is not None:  # the arguments of advance_batch_faulted / advance_reference_faulted
+            out.update(fp=self._FP, fs=cp(self._fs), rx=cp(self._rx), fconsts=self._fconsts)
+        return out
+
+    # ------------------------------------------------------------------ communication faults
+    @property
+    def fault_state(self):
+        """A snapshot (copies) of the copies' :class:`~dobs_envs.sim.fault_state.FaultState` (faults only)."""
+        if self.faults is None:
+            raise AttributeError("fault_state: this core has no communication faults (option faults=None)")
+        from ..sim.fault_state import FaultState
+
+        return FaultState(*(a.copy() for a in self._fs))
+
+    @property
+    def co_received(self) -> np.ndarray:
+        """``(B, K)`` bool: whether each agent's C-O packet arrived at the last boundary (faults only; else
+        its ``xhat`` is the held, stale estimate). A new array."""
+        if self.faults is None:
+            raise AttributeError("co_received: this core has no communication faults (option faults=None)")
+        return self._rx[0].copy()
+
+    @property
+    def oo_received_fraction(self) -> np.ndarray:
+        """``(B, K)``: the fraction of the O-O links into each agent's node whose value was received at the last
+        boundary (1 for a node without links; faults only). A new array."""
+        if self.faults is None:
+            raise AttributeError("oo_received_fraction: this core has no communication faults (option faults=None)")
+        frac = self._rx[1].astype(np.float64) @ self._oo_incidence.T
+        frac[:, self._oo_none] = 1.0
+        return frac
 
     # ------------------------------------------------------------------ read-out
     def task_errors(self) -> np.ndarray:

@@ -92,7 +92,7 @@ class HeteroMASEnv(DObsParallelEnv):
     horizon=None, observation="local", obs_dtype="float32", Q=None, R=None,
     action_bound=None, init_noise=None, state_bound=1e3, termination_penalty=True,
     reward="quadratic", cost_scale=0.1, render_mode=None, disturbance="exosystem",
-    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False, q_rest=0.1,
+    disturbance_amplitude=2.0, normalized_actions=False, padded_observations=False, faults=None, q_rest=0.1,
     r=1.0, rho=1e-3)``
     (:class:`~dobs_envs.envs.options.HeteroMASOptions`; the disturbance options do not
     apply: NE1 has no unknown input); ``q_rest``, ``r``, ``rho`` parametrise the task
@@ -100,12 +100,15 @@ class HeteroMASEnv(DObsParallelEnv):
     takes any multi-agent Scenario (``mas_agents``). ``normalized_actions`` /
     ``padded_observations``: identical agent spaces for parameter sharing (see ``tracking_v0``).
 
+    ``faults=`` (communication faults and sensor noise) as in ``tracking_v0``.
+
     ## Version History
 
     * v0: initial release.
     * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
       observation widths differ (before: always, doubling the width; the default spaces are
       unchanged).
+    * v0, issue 23: option ``faults`` (default None: unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "hetero_mas_v0", "is_parallelizable": True, "render_fps": 20}

@@ -6,6 +6,12 @@ tested against (``tests/test_core.py``): the simulation is
 :func:`dobs_envs.sim.numpy_step.control_period_numpy`, the features
 :func:`dobs_envs.envs.numpy_features.write_features_reference`, and the reward and
 termination rules are written out below, vectorised over the copies.
+
+:func:`advance_reference_faulted` is the same for
+:func:`dobs_envs.envs.fault_step_kernel.advance_batch_faulted` (communication faults): the simulation
+is :func:`dobs_envs.sim.numpy_step.control_period_faulted_numpy`, and after the features the
+agents' received quantities are written (:func:`_fault_observations`, the module doc of
+:mod:`dobs_envs.envs.fault_step_kernel` for what they are).
 """
 from __future__ import annotations
 
@@ -14,13 +20,15 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..packing import unpack
+from ..sim import fault_rng
+from ..sim.fault_state import FaultArgs, FaultState, co_link_numpy, oo_losses
 from ..sim.kernel_args import StateArrays, unpack_kernel_args
-from ..sim.numpy_step import control_period_numpy
+from ..sim.numpy_step import control_period_faulted_numpy, control_period_numpy
 from .features import FeatureArgs
 from .numpy_features import write_features_reference
 from .step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts
 
-__all__ = ["advance_reference"]
+__all__ = ["advance_reference", "advance_reference_faulted"]
 
 
 def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts):
@@ -33,7 +41,63 @@ def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts):
     return -1
 
 
-def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts):
+def advance_reference_faulted(state, W, obs, outs, u, sig, ka, SF, SI, consts, fp, fs, rx, fconsts):
+    """Numpy counterpart of :func:`~dobs_envs.envs.fault_step_kernel.advance_batch_faulted` (same arguments,
+    same effects: ``fs`` and ``rx`` updated in place)."""
+    bad = np.flatnonzero(~np.all(np.isfinite(u), axis=1))
+    if bad.size:
+        return int(bad[0])
+    with np.errstate(all="ignore"):
+        _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, (unpack(FaultArgs, *fp), fs, rx, fconsts))
+    return -1
+
+
+def _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link: bool):
+    """What the agents receive at the boundary (module doc of :mod:`dobs_envs.envs.fault_step_kernel`): noisy
+    ``y``/``xhat``/estimation errors into ``W``, the C-O link (``link``), the O-O copies held at the boundary
+    instant, the masks ``rx``; then the observation gathers. ``fs`` a :class:`FaultState` (its C-O buffers are
+    the arrays of the caller's tuple); returns it."""
+    F, C, G, off, idx = fa.F, fa.C, fa.G, fa.off, fa.idx
+    B, N, n = z.shape
+    co_nodes, foff = fconsts
+    K, E = co_nodes.shape[0], ff.sender.shape[0]
+    co_rx, oo_rx = rx
+    if ff.noise_std > 0:
+        y = np.einsum("ipn,bn->bip", C, x) + fs.noise
+        p_i = off[10:10 + N]
+        W[:, off[0]:off[0] + int(p_i.sum())] = np.concatenate([y[:, i, :p_i[i]] for i in range(N)], axis=1)
+        xhat = z + np.einsum("inp,bip->bin", G, y)
+        W[:, off[1]:off[1] + N * n] = xhat.reshape(B, N * n)
+        W[:, F:F + N] = np.linalg.norm(xhat - x[:, None, :], axis=2)
+    xh = W[:, off[1]:off[1] + N * n].reshape(B, N, n)
+    if link:
+        held, new = co_link_numpy(xh[:, co_nodes], fs, ff)
+        fs.co_sent[...], fs.co_held[...] = new.co_sent, new.co_held
+        lost = np.zeros((B, K), dtype=bool)
+        if ff.co_loss > 0:
+            lost = fault_rng.uniform(fs.seed[:, None], fault_rng.STREAM_CO_LOSS, fs.period[:, None],
+                                     np.arange(K)[None, :]) < ff.co_loss
+        co_rx[...] = ~lost
+    else:
+        co_rx[...] = True
+    s = fs.period * ff.substeps
+    due = np.full(B, True) if ff.continuous else (s % ff.exchange_steps == 0)
+    fresh = due[:, None] & (ff.weight[fs.graph] > 0) & ~oo_losses(ff, fs)
+    if ff.lag > 0:
+        old = (s // ff.exchange_steps - ff.lag) % ff.ring
+        src = fs.snapshots[np.arange(B), old][:, ff.sender]
+    else:
+        src = xh[:, ff.sender]
+    oo_rx[...] = fresh
+    W[:, foff[0]:foff[0] + K * n] = fs.co_held.reshape(B, K * n)
+    W[:, foff[1]:foff[1] + E * n] = np.where(fresh[..., None], src, fs.received).reshape(B, E * n)
+    W[:, foff[2]:foff[2] + K] = co_rx
+    W[:, foff[3]:foff[3] + E] = oo_rx
+    obs.reshape(B, -1)[...] = W[:, idx]
+    return fs
+
+
+def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults=None):
     s = StateArrays(*state)
     t, x, z, gamma, gamma_s, v, x_r = s.t, s.x, s.z, s.gamma, s.gamma_s, s.v, s.x_r
     outf, outb, reason, cycles = outs
@@ -58,13 +122,23 @@ def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts):
     p = SimpleNamespace(**k._asdict(), laplacian=lap, P_u=P_u)
     U = W[:, F + N:F + N + m].copy()
     Rc = W[:, off[7]:off[7] + m].copy()
-    x[:], z[:], gamma[:], gamma_s[:], v[:], x_r[:] = control_period_numpy(x, z, gamma, gamma_s, v, x_r, U, Rc, p)
+    if faults is None:
+        x[:], z[:], gamma[:], gamma_s[:], v[:], x_r[:] = control_period_numpy(x, z, gamma, gamma_s, v, x_r, U, Rc, p)
+    else:
+        ff, fs_arrays, rx, fconsts = faults
+        fs = FaultState(*fs_arrays)
+        *new, fs_new = control_period_faulted_numpy(x, z, gamma, gamma_s, v, x_r, U, Rc, p, ff, fs)
+        x[:], z[:], gamma[:], gamma_s[:], v[:], x_r[:] = new
+        for dst, src in zip(fs_arrays, fs_new):
+            dst[...] = src
     # 4: time, features, cost
     t += period
     cycles += 1
     rows = np.arange(B)
     write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, c.has_ref, obs, rows, cost, err, xnorm,
                              finite)
+    if faults is not None:
+        _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link=True)
     # 5: reward and termination
     if c.reward_code == 1:  # log
         shaped = np.where(cost < np.inf, np.log1p(cost / c.log_c0), np.inf)

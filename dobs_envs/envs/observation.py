@@ -36,11 +36,26 @@ name           size             content
 ``gamma_s``    ``N``            adaptive gains ``gamma_is`` of eq. (gammaiis)
 ``v``          ``m_v``          unknown input ``v`` (privileged; only when ``B_v != 0``)
 ``time``       ``1``            simulated time ``t`` (s)
+``received``   ``1 + D``        with communication faults only (option ``faults``): 1 if its C-O
+                                packet arrived at this boundary (else ``xhat`` is the held, stale
+                                estimate), then per neighbour slot 1 if that neighbour's value was
+                                received at this boundary (else held from an earlier broadcast),
+                                0 for padding
 =============  ===============  ================================================================
 
-Presets: ``"local"`` = ``(y, xhat, neighbors, mask, r)`` (``r`` only with a
-reference), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s, v, time)``
-(each only where it exists).
+With communication faults (option ``faults``, :mod:`dobs_envs.sim.faults`) an agent observes only
+what reached its node: ``y`` with the held measurement noise, ``xhat`` the estimate held at the
+controller's end of the C-O link (:func:`~dobs_envs.sim.fault_state.co_link_numpy`: delayed, or the
+last one received), ``neighbors`` the copies node ``i`` holds of its O-O neighbours' estimates
+(neighbours: those of the union of the switching graphs), and ``received`` (in both presets) the
+received/stale mask; the privileged components stay the true values (``estimates``: the nodes' own,
+noisy-measurement estimates). The feature vector then ends with ``xhat_rx (K n) | nbr_rx (E n) |
+co_rx (K) | oo_rx (E)`` before the constants (written by
+:mod:`dobs_envs.envs.fault_step_kernel`).
+
+Presets: ``"local"`` = ``(y, xhat, neighbors, mask, r, received)`` (``r`` only with a
+reference, ``received`` only with faults), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s,
+v, time)`` (each only where it exists).
 
 Padded observations (option ``padded_observations=True``, ``FeatureLayout(..., padded=True)``):
 when the agents' widths differ, every agent observes ``2 W`` values, ``W`` the widest agent's
@@ -59,16 +74,17 @@ import numpy as np
 
 __all__ = ["COMPONENTS", "LOCAL", "FULL", "FeatureLayout", "resolve_components"]
 
-COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
-LOCAL = ("y", "xhat", "neighbors", "mask", "r")
+COMPONENTS = ("y", "xhat", "neighbors", "mask", "r", "x", "x_r", "estimates", "gamma", "gamma_s", "v", "time",
+              "received")
+LOCAL = ("y", "xhat", "neighbors", "mask", "r", "received")
 FULL = LOCAL + ("x", "x_r", "estimates", "gamma", "gamma_s", "v", "time")
 #: components that exist only in some systems (silently dropped from the presets)
-_OPTIONAL = {"r": "has_reference", "x_r": "has_reference", "v": "has_unknown_input"}
+_OPTIONAL = {"r": "has_reference", "x_r": "has_reference", "v": "has_unknown_input", "received": "has_faults"}
 
 
-def resolve_components(spec, *, has_reference: bool, has_unknown_input: bool) -> tuple:
+def resolve_components(spec, *, has_reference: bool, has_unknown_input: bool, has_faults: bool = False) -> tuple:
     """The tuple of component names selected by ``spec`` ("local", "full" or a sequence of names)."""
-    avail = {"has_reference": has_reference, "has_unknown_input": has_unknown_input}
+    avail = {"has_reference": has_reference, "has_unknown_input": has_unknown_input, "has_faults": has_faults}
     if isinstance(spec, str):
         if spec not in ("local", "full"):
             raise ValueError(f"observation must be 'local', 'full' or a sequence of component names from {COMPONENTS}, got {spec!r}")
@@ -84,7 +100,8 @@ def resolve_components(spec, *, has_reference: bool, has_unknown_input: bool) ->
         if c not in COMPONENTS:
             raise ValueError(f"unknown observation component {c!r}; valid components are {COMPONENTS}")
         if c in _OPTIONAL and not avail[_OPTIONAL[c]]:
-            what = "a reference signal" if _OPTIONAL[c] == "has_reference" else "an unknown input (B_v)"
+            what = {"has_reference": "a reference signal", "has_unknown_input": "an unknown input (B_v)",
+                    "has_faults": "communication faults (option faults)"}[_OPTIONAL[c]]
             raise ValueError(f"observation component {c!r} needs {what}, which this system does not have")
     if len(set(names)) != len(names):
         raise ValueError(f"observation components must not repeat, got {names}")
@@ -105,10 +122,21 @@ class FeatureLayout:
         observation zero-padded to the widest agent's width ``W`` followed by the ``obs_mask``
         component (``W`` entries, 1 = real entry); with equal widths only the bounds are united
         (see module doc).
+    fault_links : ``(sender (E,), receiver (E,))`` of the directed O-O links, sorted by receiver then
+        sender (:class:`~dobs_envs.sim.fault_state.FaultArgs`), with communication faults: adds the
+        received quantities to the feature vector, the agents observe them (module doc) and the
+        neighbours are the links' senders (``neighbors`` is then not used).
     """
 
-    def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components, padded: bool = False):
+    def __init__(self, p, n, m, m_v, neighbors, links, channel_slices, components, padded: bool = False,
+                 fault_links=None):
         N = len(p)
+        K = len(links)
+        if fault_links is not None:
+            sender, receiver = (np.asarray(a, dtype=np.intp) for a in fault_links)
+            neighbors = [sender[receiver == i] for i in range(N)]
+            #: first link into each node (links sorted by receiver): link of neighbour slot s of node i
+            link0 = np.searchsorted(receiver, np.arange(N))
         self.N, self.n, self.m, self.m_v = N, n, m, m_v
         pos = 0
 
@@ -130,6 +158,11 @@ class FeatureLayout:
         self.r = take(m)
         self.time = take(1)
         self.e = take(n)  # task error x - x_r (or x); not observable, used for the reward
+        #: communication faults: what the agents receive (module doc); None without faults
+        self.faults = fault_links is not None
+        if self.faults:
+            E = len(fault_links[0])
+            self.xhat_rx, self.nbr_rx, self.co_rx, self.oo_rx = take(K * n), take(E * n), take(K), take(E)
         self.zero = take(1).start
         self.one = take(1).start
         self.size = pos
@@ -144,12 +177,20 @@ class FeatureLayout:
             for c in components:
                 if c == "y":
                     idx = np.arange(self.y_nodes[i].start, self.y_nodes[i].stop)
+                elif c == "xhat" and self.faults:
+                    idx = self.xhat_rx.start + k * n + np.arange(n)
                 elif c == "xhat":
                     idx = self.xhat.start + i * n + np.arange(n)
                 elif c == "neighbors":
                     idx = np.full(D * n, self.zero)
                     for s, j in enumerate(nb):
-                        idx[s * n:(s + 1) * n] = self.xhat.start + j * n + np.arange(n)
+                        src = self.nbr_rx.start + (link0[i] + s) * n if self.faults else self.xhat.start + j * n
+                        idx[s * n:(s + 1) * n] = src + np.arange(n)
+                elif c == "received":
+                    idx = np.full(1 + D, self.zero)
+                    idx[0] = self.co_rx.start + k
+                    for s in range(len(nb)):
+                        idx[1 + s] = self.oo_rx.start + link0[i] + s
                 elif c == "mask":
                     idx = np.array([self.one if s < len(nb) else self.zero for s in range(D)], dtype=int)
                 elif c == "r":
@@ -220,6 +261,10 @@ class FeatureLayout:
                          self.gamma_s.start, self.v.start, self.r.start, self.time.start, self.e.start]
                         + list(p_i), dtype=np.int64)
 
+    def fault_offsets(self) -> np.ndarray:
+        """Start offsets ``(xhat_rx, nbr_rx, co_rx, oo_rx)`` of the received quantities (faults only)."""
+        return np.array([self.xhat_rx.start, self.nbr_rx.start, self.co_rx.start, self.oo_rx.start], dtype=np.int64)
+
     def bounds(self, k: int, dtype):
         """``(low, high)`` of agent ``k``'s observation (mask entries in [0, 1], the rest unbounded).
 
@@ -247,9 +292,10 @@ class FeatureLayout:
         low = np.full(L, -np.inf, dtype=dtype)
         high = np.full(L, np.inf, dtype=dtype)
         lay = self.agent_layout[k]
-        if "mask" in lay:
-            low[lay["mask"]] = 0.0
-            high[lay["mask"]] = 1.0
+        for c in ("mask", "received"):
+            if c in lay:
+                low[lay[c]] = 0.0
+                high[lay[c]] = 1.0
         if "time" in lay:
             low[lay["time"]] = 0.0
         return low, high

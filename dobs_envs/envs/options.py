@@ -23,6 +23,7 @@ import numpy as np
 
 from ..linalg.validation import NUMERIC_KINDS, as_flag, as_float, as_int, check_seed
 from ..scenarios.random import GRAPH_TOPOLOGIES, MAX_SIZE
+from ..sim.faults import Faults
 
 __all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
 
@@ -92,6 +93,12 @@ class EnvOptions:
         ``observation_layout``); where every agent already has width ``W``, its observation as it
         is (no padding, no mask). Either way the same bounds for every agent (the union). With ``normalized_actions`` every agent has identical spaces: one shared policy
         (parameter sharing in SuperSuit, RLlib, BenchMARL, TorchRL) needs no wrapper.
+    faults : dict or Faults, optional
+        Communication faults and sensor noise (issue 23): ``None`` (default) the paper's ideal links,
+        no fault code runs; a dict with the keys ``oo_period``, ``oo_loss``, ``oo_burst``,
+        ``oo_delay``, ``co_loss``, ``co_delay``, ``switching``, ``measurement_noise`` or a
+        :class:`~dobs_envs.sim.faults.Faults` (semantics there). Stored as a ``Faults`` (or None);
+        unknown keys raise ``TypeError``, bad values ``ValueError`` naming ``faults: <key>``.
     """
 
     scenario: Any = None
@@ -114,6 +121,7 @@ class EnvOptions:
     disturbance_amplitude: float = 2.0
     normalized_actions: bool = False
     padded_observations: bool = False
+    faults: Any = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -202,6 +210,7 @@ class EnvOptions:
         set_("disturbance_amplitude", as_float(self.disturbance_amplitude, "disturbance_amplitude", minimum=0.0))
         for name in ("normalized_actions", "padded_observations"):
             set_(name, as_flag(getattr(self, name), name))
+        set_("faults", Faults.from_value(self.faults))
 
 
 @dataclass(frozen=True, eq=False)

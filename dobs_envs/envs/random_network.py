@@ -89,7 +89,7 @@ class RandomNetworkEnv(DObsParallelEnv):
     observation="local", obs_dtype="float32", Q=None, R=None, action_bound=None,
     init_noise=None, state_bound=1e3, termination_penalty=True, reward="quadratic",
     cost_scale=0.1, render_mode=None, disturbance="exosystem", disturbance_amplitude=2.0,
-    normalized_actions=False, padded_observations=False, kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
+    normalized_actions=False, padded_observations=False, faults=None, kind="plant", system_seed=0, n_states=6, n_controllers=3, n_observers=4, n_agents=4,
     graph="random", edge_prob=0.3, unknown_input=False, controller=None,
     generator_kwargs=None)`` (:class:`~dobs_envs.envs.options.RandomNetworkOptions`;
     common options as ``tracking_v0``, the disturbance options with ``unknown_input=True``;
@@ -99,12 +99,15 @@ class RandomNetworkEnv(DObsParallelEnv):
     ``normalized_actions=True, padded_observations=True`` give them identical spaces for a
     shared policy (see ``tracking_v0``).
 
+    ``faults=`` (communication faults and sensor noise) as in ``tracking_v0``.
+
     ## Version History
 
     * v0: initial release.
     * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
       observation widths differ (before: always, doubling the width; the default spaces are
       unchanged).
+    * v0, issue 23: option ``faults`` (default None: unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}

@@ -38,11 +38,14 @@ try:
     import numba as _numba
 
     _njit = _numba.njit(cache=True, fastmath=False, nogil=True)
+    _njit_inline = _numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
 except ImportError:  # pragma: no cover
     def _njit(f):
         return f
 
-__all__ = ["StepConsts", "advance_batch", "advance_range", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
+    _njit_inline = _njit
+
+__all__ = ["StepConsts", "advance_batch", "advance_range", "apply_inputs", "finish_row", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
            "REASON_NON_FINITE", "REASON_HORIZON"]
 
 #: reason codes (int8) of a step
@@ -100,27 +103,13 @@ def _clean(a, b, big, ncols):
             a[b, j] = big if o > 0 else -big
 
 
-@_njit
-def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
-    """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
-    releases the GIL: threads may advance disjoint ranges of one batch concurrently."""
-    KF, KI = ka
-    ka = unpack_kernel_args(KF, KI)
-    fa = unpack_static(SF, SI)
-    c = StepConsts(*consts)
-    st = StateArrays(*state)
-    t, x, z, gamma, gamma_s, v, x_r = st.t, st.x, st.z, st.gamma, st.gamma_s, st.v, st.x_r
-    outf, outb, reason, cycles = outs
-    reward, cost, err, xnorm = outf[0], outf[1], outf[2], outf[3]
-    finite, term, trunc = outb[0], outb[1], outb[2]
+@_njit_inline
+def apply_inputs(lo, hi, t, v, W, u, sig, ou, c):
+    """Steps 1-2 for the copies ``lo .. hi-1``: the clipped input into ``W[b, ou:ou+m]``, the "random"
+    disturbance ``v[b]`` at the period's start (``c`` the :class:`StepConsts`)."""
+    u_lo, u_hi = c.u_lo, c.u_hi
     sig_a, sig_w, sig_ph = sig[0], sig[1], sig[2]
-    u_lo, u_hi, period = c.u_lo, c.u_hi, c.period
-    F = fa.F
-    N = z.shape[1]
     m = u.shape[1]
-    ou = F + N
-    o_r = fa.off[7]
-    # 1-2: applied inputs, disturbance at the period's start
     for b in range(lo, hi):
         for j in range(m):
             uj = u[b, j]
@@ -132,47 +121,77 @@ def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
                 for l in range(sig_a.shape[2]):
                     s += sig_a[b, j, l] * np.sin(sig_w[b, j, l] * tb + sig_ph[b, j, l])
                 v[b, j] = s
+
+
+@_njit_inline
+def finish_row(b, cb, xn, fin, x, W, F, obs2, outs, c):
+    """Step 5 of copy ``b`` from its stage cost ``cb``, ``||x||`` ``xn`` and finiteness ``fin``: reward,
+    termination (reason codes), truncation, cleaning of a terminal copy's observations and features."""
+    outf, outb, reason, cycles = outs
+    reward, term, trunc = outf[0], outb[1], outb[2]
+    if c.reward_code == 1:  # log
+        shaped = np.log1p(cb / c.log_c0) if cb < np.inf else np.inf
+    elif c.reward_code == 2:  # sqrt
+        shaped = np.sqrt(cb)
+    else:
+        shaped = cb
+    rw = -shaped * c.period
+    if xn > c.state_bound and _row_finite(x, b):  # a finite plant state beyond the bound: reason 1
+        tm, rs = True, REASON_STATE_BOUND
+    elif not fin:
+        tm, rs = True, REASON_NON_FINITE
+    else:
+        tm, rs = False, REASON_NONE
+    tr = False
+    if tm:
+        _clean(obs2, b, c.big_obs, obs2.shape[1])
+        _clean(W, b, np.finfo(np.float64).max, F)  # the feature vector; est/u stay raw (diagnostics)
+        if not np.isfinite(rw):
+            rw = -c.bound_step_cost
+        if c.termination_penalty:
+            rw -= c.bound_step_cost * max(0, c.penalty_cycles - cycles[b])
+    elif c.max_cycles >= 0 and cycles[b] >= c.max_cycles:
+        tr, rs = True, REASON_HORIZON
+    reward[b] = rw
+    term[b] = tm
+    trunc[b] = tr
+    reason[b] = rs
+
+
+@_njit
+def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
+    """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
+    releases the GIL: threads may advance disjoint ranges of one batch concurrently."""
+    KF, KI = ka
+    ka = unpack_kernel_args(KF, KI)
+    fa = unpack_static(SF, SI)
+    c = StepConsts(*consts)
+    st = StateArrays(*state)
+    t, x, z, gamma, gamma_s, v, x_r = st.t, st.x, st.z, st.gamma, st.gamma_s, st.v, st.x_r
+    outf, outb, reason, cycles = outs
+    cost, err, xnorm = outf[1], outf[2], outf[3]
+    finite = outb[0]
+    F = fa.F
+    N = z.shape[1]
+    m = u.shape[1]
+    ou = F + N
+    o_r = fa.off[7]
+    # 1-2: applied inputs, disturbance at the period's start
+    apply_inputs(lo, hi, t, v, W, u, sig, ou, c)
     # 3: one control period (held input and reference command)
     advance_rows(x, z, gamma, gamma_s, v, x_r, W[:, ou:ou + m], W[:, o_r:o_r + m], ka, lo, hi)
     # 4-5: features, reward, termination
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
     y = np.empty(fa.C.shape[1])
-    f64max = np.finfo(np.float64).max
     for b in range(lo, hi):
-        t[b] = t[b] + period
+        t[b] = t[b] + c.period
         cycles[b] += 1
         cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y)
         cost[b] = cb
         err[b] = e
         xnorm[b] = xn
         finite[b] = fin
-        if c.reward_code == 1:  # log
-            shaped = np.log1p(cb / c.log_c0) if cb < np.inf else np.inf
-        elif c.reward_code == 2:  # sqrt
-            shaped = np.sqrt(cb)
-        else:
-            shaped = cb
-        rw = -shaped * period
-        if xn > c.state_bound and _row_finite(x, b):  # a finite plant state beyond the bound: reason 1
-            tm, rs = True, REASON_STATE_BOUND
-        elif not fin:
-            tm, rs = True, REASON_NON_FINITE
-        else:
-            tm, rs = False, REASON_NONE
-        tr = False
-        if tm:
-            _clean(obs2, b, c.big_obs, obs2.shape[1])
-            _clean(W, b, f64max, F)  # the feature vector; est/u stay raw (diagnostics)
-            if not np.isfinite(rw):
-                rw = -c.bound_step_cost
-            if c.termination_penalty:
-                rw -= c.bound_step_cost * max(0, c.penalty_cycles - cycles[b])
-        elif c.max_cycles >= 0 and cycles[b] >= c.max_cycles:
-            tr, rs = True, REASON_HORIZON
-        reward[b] = rw
-        term[b] = tm
-        trunc[b] = tr
-        reason[b] = rs
+        finish_row(b, cb, xn, fin, x, W, F, obs2, outs, c)
 
 
 @_njit

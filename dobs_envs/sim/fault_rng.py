@@ -48,7 +48,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; the numpy path 
         return f
 
 __all__ = ["STREAM_OO_LOSS", "STREAM_OO_BURST", "STREAM_CO_LOSS", "STREAM_SWITCHING", "STREAM_NOISE", "STREAMS",
-           "mix64", "hash_draw", "uniform_bits", "normal_bits", "log1m_bits", "cos2pi_bits", "uniform", "normal",
+           "mix64", "period_key", "hash_draw", "uniform_at", "normal_at", "uniform_bits", "normal_bits", "log1m_bits", "cos2pi_bits", "uniform", "normal",
            "as_seeds"]
 
 _U = np.uint64
@@ -98,12 +98,33 @@ def mix64(z):
 
 
 @_jitable
-def hash_draw(seed, stream, period, index):
-    """The 64 random bits of draw ``(seed, stream, period, index)`` (all ``uint64``; module doc)."""
+def period_key(seed, stream, period):
+    """The key ``k2`` of ``(seed, stream, period)`` (module doc): ``hash_draw(seed, stream, period, index)`` is
+    ``mix64(k2 + (index + 1) G)``, so a kernel drawing many indices of one period computes it once
+    (:func:`uniform_at`, :func:`normal_at`: the same bits as :func:`uniform_bits`, :func:`normal_bits`)."""
     k = mix64(seed + GOLDEN)
     k = mix64(k + (stream + _ONE) * GOLDEN)
-    k = mix64(k + (period + _ONE) * GOLDEN)
-    return mix64(k + (index + _ONE) * GOLDEN)
+    return mix64(k + (period + _ONE) * GOLDEN)
+
+
+@_jitable
+def hash_draw(seed, stream, period, index):
+    """The 64 random bits of draw ``(seed, stream, period, index)`` (all ``uint64``; module doc)."""
+    return mix64(period_key(seed, stream, period) + (index + _ONE) * GOLDEN)
+
+
+@_jitable
+def uniform_at(key, index):
+    """:func:`uniform_bits` of the draw ``index`` of the period whose :func:`period_key` is ``key``."""
+    return (mix64(key + (index + _ONE) * GOLDEN) >> _S11) * _TWO_M53
+
+
+@_jitable
+def normal_at(key, index):
+    """:func:`normal_bits` of the draw ``index`` of the period whose :func:`period_key` is ``key``."""
+    k1 = mix64(key + (_TWO * index + _ONE) * GOLDEN) >> _S11
+    k2 = mix64(key + (_TWO * index + _TWO) * GOLDEN) >> _S11
+    return np.sqrt(-2.0 * log1m_bits(k1)) * cos2pi_bits(k2)
 
 
 @_jitable
@@ -208,7 +229,8 @@ def normal(seed, stream, period, index) -> np.ndarray:
 
 def as_seeds(seeds, batch: int, name: str = "seeds") -> np.ndarray:
     """``(batch,)`` ``uint64`` copy of per-copy fault seeds (non-negative integers below ``2**64``)."""
-    arr = np.asarray(seeds)
+    # a list of Python ints: checked one by one (numpy would turn [1, 2**63] into float64)
+    arr = np.asarray(seeds, dtype=object) if isinstance(seeds, (list, tuple)) else np.asarray(seeds)
     if arr.ndim == 0:
         arr = np.broadcast_to(arr, (batch,))
     if arr.shape != (batch,):
