@@ -52,7 +52,14 @@ the pooled ``y`` of every registered env is observable. Where the estimates woul
 ``estimates="all"``) and the env has faults, the filter refuses with :class:`FaultedEstimatesError`: a held
 copy is not the current estimate its measurement model assumes, and this baseline does not pretend it is.
 So on ``tracking_lossy`` the information column "pooled: every node's obs" stays true: noisy ``y``, ``r``, its own
-past inputs, and nothing the agents do not receive.
+past inputs, and nothing the agents do not receive. Measured on ``tracking_lossy_v0`` (tuning episodes
+20000-20009, 2026-12-03; mean over episodes of J / J_paper on the same faulted episode, then of J over the
+paper's cost on ``tracking_v0``, the same episodes): the paper's controller 1 / 1.056, PooledKalman 0.360 /
+0.380 (0.380 without faults), PooledLQG 0.319 / 0.337 (0.337), the oracle 0.360 / 0.380 (identical: the true
+state). The sensor noise in the model barely changes the estimate's accuracy (RMS error over steps 20-80 of
+seed 20003: 0.00559 with it, 0.00562 trusting ``y`` to the rounding: with the small process noise both average
+the history) but makes the covariance consistent (NEES ~9 for 9 states instead of ~6e4;
+``tests/test_baselines_faults.py``).
 
 Estimator (:class:`PooledKalmanFilter`)
 ---------------------------------------
