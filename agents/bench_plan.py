@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass, field
 
 from .algos import LEGACY_LIBRARY, backend
-from .config import ENVS
+from .config import ENVS, TASKS
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
@@ -282,6 +282,10 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
     written). With :func:`pending_runs` it tells which of them a stored result already answers.
 
+    ``env``: a registered name (:data:`agents.config.ENVS`) or ``"all"``: the fault-free tasks
+    (:data:`agents.config.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
+    them again under faults and is run by its name).
+
     ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
     Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
     budget's steps, but with the file's section for the env (:func:`agents.recipes.recipe_file_section`:
@@ -293,7 +297,7 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     section for an env."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
-    env_names = list(ENVS) if env == "all" else [env]
+    env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.TASKS)
     for e in env_names:
         if e not in ENVS:
             raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")

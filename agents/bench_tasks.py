@@ -1,7 +1,8 @@
 """The benchmark's work units, run by an execution backend (:mod:`agents.bench_exec`) in a worker:
 train and evaluate one (env, agent, seed) run (:func:`train_and_evaluate`), evaluate a kept model
 again on other episodes (:func:`reevaluate`), evaluate the analytic controllers of one env
-(:func:`analytic_results`).
+(:func:`analytic_results`) and, for an env with faults, the paper's controller on its fault-free counterpart
+(:func:`fault_free_paper`).
 
 A worker needs no file system shared with the driver: it trains in a scratch directory of its own
 machine (``scratch``: the directory to make it in, ``None`` for the system's temporary directory),
@@ -21,10 +22,11 @@ import numpy as np
 
 from .bench_plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
 from .bench_store import RECORD_FILES, read_run_files
-from .config import gym_factory, parallel_factory
+from .config import FAULT_FREE, gym_factory, parallel_factory
 from .evaluate import evaluate_policy
 
-__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "compile_kernels", "mean_trajectory", "executed_on"]
+__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
+           "mean_trajectory", "executed_on"]
 
 
 def mean_trajectory(series) -> np.ndarray:
@@ -130,6 +132,20 @@ def analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) 
     return out
 
 
+def fault_free_paper(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
+    """The paper's controller on the fault-free counterpart of ``env`` (:data:`agents.config.FAULT_FREE`: the
+    same task with ``faults=None``) on the episodes ``eval_seed + k``: its evaluation payload, the reference
+    ``J_paper,fault-free`` of the degradation columns (:mod:`agents.bench_report`). The same seed gives the
+    same episode in both environments (initial state, reference; the faulted environment draws its fault
+    seed last from the copy's generator), which the report checks on the recorded ``x(0)``."""
+    from baselines.policies import SeparationPolicy
+
+    penv = parallel_factory(FAULT_FREE[env], env_kwargs)()
+    out = _episode_payload(evaluate_policy(penv, SeparationPolicy(penv), episodes, eval_seed, parallel=True))
+    penv.close()
+    return out
+
+
 def compile_kernels(env_names: list[str], env_kwargs: dict) -> None:
     """Compile (or load from numba's on-disk cache) the compiled steps every worker needs, once, in
     this process before the workers start: on a cold cache (a fresh install) each worker would
@@ -137,7 +153,8 @@ def compile_kernels(env_names: list[str], env_kwargs: dict) -> None:
     cold against 14 s warm with the workers compiling; one compilation takes ~90 s)."""
     from baselines.policies import SeparationPolicy
 
-    for e in env_names:
+    # with the fault-free counterparts of faulted envs (fault_free_paper runs them)
+    for e in dict.fromkeys([*env_names, *(FAULT_FREE[e] for e in env_names if e in FAULT_FREE)]):
         penv = parallel_factory(e, env_kwargs)()
         obs, _ = penv.reset(seed=0)
         penv.step(SeparationPolicy(penv)(obs))

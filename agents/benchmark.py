@@ -1,7 +1,8 @@
 """RL and hybrid agents versus the paper's controllers, over training seeds, with confidence intervals.
 
 ``dobs-envs benchmark --env tracking --budget quick --out runs/benchmark``
-(``--env all``: tracking, disturbance_rejection, hetero_mas, random_network)
+(``--env all``: the fault-free tasks tracking, disturbance_rejection, hetero_mas, random_network;
+``--env tracking_lossy``: tracking over a lossy observer network, with the degradation columns of step 3)
 
 1. **Train** every agent of the budget with several training seeds, in parallel
    (``--backend``: worker processes by default, ``--workers`` of them, one per core; or Ray
@@ -23,7 +24,10 @@
    scores with 95 % percentile-bootstrap CIs that resample whole runs, the probability of
    improvement ``P(J < J_paper)`` over matched (run, episode) pairs, and the transient cost
    (first 2 s), the steady-state error (RMS of the task error over the last 5 s) and the
-   failure rate; each row states its budget and the information its policy acts on.
+   failure rate; each row states its budget and the information its policy acts on. On an env with
+   communication faults (``tracking_lossy``) each row also has the **degradation** ``J_policy /
+   J_paper,fault-free``: its cost relative to the paper's controller on the fault-free counterpart
+   (``tracking``) on the same episodes, with the same statistics (:mod:`agents.bench_report`).
 4. **Write** ``<out>/<env>/results.{json,csv}``, ``error_norms.png``,
    ``learning_curves.png`` and ``<out>/summary.{json,png}`` (every env's cost ratios
    with their CIs).
@@ -57,18 +61,24 @@ from .bench_report import (PAPER_NOTES, STATISTICS_DOC, SUMMARY_XMAX, TABLE_COLU
                            write_env_report, write_summary)
 from .bench_store import (MARKER, OutDirError, claim_out_dir, foreign_entries, read_run_files,  # noqa: F401
                           write_record)
-from .bench_tasks import analytic_results, compile_kernels, reevaluate, train_and_evaluate
+from .bench_tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate
 from .bench_tasks import mean_trajectory as _mean_trajectory  # noqa: F401  (the name of earlier releases)
+from .config import FAULT_FREE
 
 __all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "reevaluated_runs", "replaced_runs",
            "BenchmarkPlan", "RunConflictError", "format_table", "AgentSpec", "BACKENDS", "OutDirError", "MARKER",
            "foreign_entries", "claim_out_dir", "stored_answer"]
 
+#: the job key of the paper's controller on an env's fault-free counterpart
+#: (:func:`agents.bench_tasks.fault_free_paper`)
+FAULT_FREE_PAPER = "fault_free_paper"
+
 
 def _jobs(plan: BenchmarkPlan, scratch: str | None, eval_seed: int) -> tuple[list[Job], dict]:
     """The work of ``plan`` not answered by a stored run: a training job per run to train, an evaluation
     job per kept model to evaluate again (its files read here and sent along), the analytic
-    controllers' evaluation per env (last: short jobs fill the gaps); and the stored results reused,
+    controllers' evaluation per env and, for an env with faults, the paper's controller on its fault-free
+    counterpart (last: short jobs fill the gaps); and the stored results reused,
     ``{(env, agent, seed): result}``."""
     train, again, reused = [], [], {}
     for sp in plan.specs:
@@ -83,6 +93,9 @@ def _jobs(plan: BenchmarkPlan, scratch: str | None, eval_seed: int) -> tuple[lis
             train.append(Job(("train", *key), train_and_evaluate, (sp, scratch), cpus=sp["threads"] or 1))
     episodes = len(plan.eval_seeds)
     analytic = [Job(("analytic", e), analytic_results, (e, plan.env_kwargs, eval_seed, episodes)) for e in plan.envs]
+    # an env with faults: the paper's controller on its fault-free counterpart, the degradation columns' reference
+    analytic += [Job((FAULT_FREE_PAPER, e), fault_free_paper, (e, plan.env_kwargs, eval_seed, episodes))
+                 for e in plan.envs if e in FAULT_FREE]
     return train + again + analytic, reused
 
 
@@ -123,6 +136,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
         shutil.rmtree(sp["path"])
     specs = {(sp["env"], sp["agent"], sp["seed"]): sp for sp in P.specs}
     analytic: dict[str, dict] = {}
+    fault_free: dict[str, dict] = {}  # env with faults -> the paper's payload on its fault-free counterpart
     placed: dict[str, dict] = {}  # where each run trained or evaluated by this call ran
     t_train = time.perf_counter()
     bar = None
@@ -139,6 +153,9 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                 if job.key[0] == "analytic":
                     analytic[job.key[1]] = res
                     continue
+                if job.key[0] == FAULT_FREE_PAPER:
+                    fault_free[job.key[1]] = res
+                    continue
                 key = job.key[1:]
                 write_record(specs[key]["path"], res)  # the driver writes; a finished run is kept from here on
                 results[key] = {**res["result"], "reevaluated": True} if res["reevaluated"] else res["result"]
@@ -152,7 +169,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
 
     per_env_rows, docs = {}, {}
     for e in P.envs:
-        per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e])
+        per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e], fault_free.get(e))
     return write_summary(out, P, per_env_rows, docs, backend=backend, address=address,
                          workers=getattr(be, "workers", None), executed_on=placed,
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

@@ -12,7 +12,7 @@ from collections import Counter
 from .bench_exec import BACKENDS
 from .bench_plan import AGENTS, BUDGETS
 from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
-from .config import ALGOS, ENVS
+from .config import ALGOS, ENVS, FAULT_FREE, TASKS
 
 __all__ = ["add_parser"]
 
@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
     # defaults of the run's identity are None here (applied in _train) so that --resume can tell
     # which options were given and check them against the run's config
     p.add_argument("--env", default=None,
-                   help="tracking (default) | disturbance_rejection | hetero_mas | random_network, or a Gymnasium id")
+                   help=f"{' | '.join(ENVS)} (default tracking), or a Gymnasium id")
     p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3 | crossq (the off-policy algorithms train with SBX when the jax "
                         "extra is installed, else with stable-baselines3 / sb3-contrib)")
     p.add_argument("--multi-agent", action="store_true", default=None,
@@ -69,7 +69,10 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "
                                          "oracle, decentralised and zero input; IQM and bootstrap CIs")
-    p.add_argument("--env", default="tracking", choices=sorted(ENVS) + ["all"])
+    p.add_argument("--env", default="tracking", choices=sorted(ENVS) + ["all"],
+                   help=f"the environment, or all: the fault-free tasks ({', '.join(TASKS)}); an env with "
+                        f"communication faults ({', '.join(FAULT_FREE)}) adds the degradation columns J / J_paper on "
+                        f"its fault-free counterpart")
     p.add_argument("--budget", choices=sorted(BUDGETS), default="quick")
     p.add_argument("--out", default="runs/benchmark")
     p.add_argument("--seed", type=_seed, default=0, help="first training seed (seeds seed, seed+1, ...)")
@@ -230,8 +233,7 @@ def _train(args) -> int:
         _usage_error(str(exc))
     args.multi_agent = bool(args.multi_agent)
     if args.env is not None and not args.env.strip():
-        _usage_error("--env '': expected an env name (tracking, disturbance_rejection, hetero_mas, random_network) "
-                     "or a Gymnasium id")
+        _usage_error(f"--env '': expected an env name ({', '.join(ENVS)}) or a Gymnasium id")
     try:
         env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
                              what="--env")
@@ -448,6 +450,9 @@ def _benchmark(args) -> int:
         print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}, evaluation episodes "
               f"{summ['eval_seeds'][0]}..{summ['eval_seeds'][-1]} (the same for every policy)")
         print(table)
+        if env in summ.get("fault_free", {}):
+            print(f"{env} has communication faults: J / J_paper,fault-free = J over the paper's controller's cost on "
+                  f"{summ['fault_free'][env]} (no faults) on the same episodes (results.json: degradation_*)")
     for name, r in summ["recipe_files"].items():
         print(f"{name}: {r['label']} trained with {r['file']} (sha256 {r['sha256'][:12]}...)")
     nodes = Counter((w["host"], w["ray_node_id"]) for w in summ["executed_on"].values() if w)

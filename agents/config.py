@@ -2,9 +2,10 @@
 
 Environment names
 -----------------
-``tracking``, ``disturbance_rejection``, ``hetero_mas``, ``random_network`` map to the
-centralised Gymnasium ids ``dobs_envs/<Name>-v0`` and to the PettingZoo modules
-``dobs_envs.<name>_v0`` (multi-agent). Any other Gymnasium id (e.g. ``Pendulum-v1``)
+``tracking``, ``tracking_lossy``, ``disturbance_rejection``, ``hetero_mas``, ``random_network`` (the
+registry, :mod:`dobs_envs.registry`) map to the centralised Gymnasium ids ``dobs_envs/<Name>-v0`` and to the
+PettingZoo modules ``dobs_envs.<name>_v0`` (multi-agent); ``tracking_lossy`` is ``tracking`` with communication
+faults (:data:`FAULT_FREE`). Any other Gymnasium id (e.g. ``Pendulum-v1``)
 works for centralised training; ``"package.module:factory"`` names a ParallelEnv
 factory for multi-agent training.
 
@@ -66,9 +67,9 @@ from typing import Any, Callable
 
 import yaml
 
-__all__ = ["ENVS", "ALGOS", "OFF_POLICY_ALGOS", "NOISE_TYPES", "HYPERPARAMS_DIR", "gym_id", "parallel_factory", "gym_factory",
-           "load_hyperparams", "read_hyperparams_file", "env_key", "check_env_name", "EnvNameError",
-           "HyperparamsError", "ACTIVATIONS", "VARIANTS"]
+__all__ = ["ENVS", "FAULT_FREE", "TASKS", "ALGOS", "OFF_POLICY_ALGOS", "NOISE_TYPES", "HYPERPARAMS_DIR", "gym_id",
+           "parallel_factory", "gym_factory", "load_hyperparams", "read_hyperparams_file", "env_key", "check_env_name",
+           "EnvNameError", "HyperparamsError", "ACTIVATIONS", "VARIANTS"]
 
 HYPERPARAMS_DIR = os.path.join(os.path.dirname(__file__), "hyperparams")
 
@@ -76,6 +77,12 @@ from dobs_envs.registry import ENVIRONMENTS as _REGISTRY  # noqa: E402
 
 #: benchmark environments: short name -> (Gymnasium id, PettingZoo module), from dobs_envs.registry
 ENVS = {name: (e.gym_id, e.module) for name, e in _REGISTRY.items()}
+#: environments with communication faults on by default -> their fault-free counterpart (the same task with
+#: ``faults=None``; :attr:`dobs_envs.registry.EnvEntry.fault_free`), e.g. ``{"tracking_lossy": "tracking"}``
+FAULT_FREE = {name: e.fault_free for name, e in _REGISTRY.items() if e.fault_free is not None}
+#: the fault-free tasks, in registry order: what the benchmark's ``--env all`` runs (a faulted variant is the
+#: same task again, run by its name; :mod:`agents.benchmark`)
+TASKS = tuple(name for name in ENVS if name not in FAULT_FREE)
 
 ALGOS = ("ppo", "sac", "td3", "crossq")
 MULTI_AGENT_ALGOS = ("ppo", "sac")

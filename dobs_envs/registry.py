@@ -36,6 +36,9 @@ class EnvEntry:
     gym_id : registered id of the centralised Gymnasium view.
     t_end : horizon (s) of the default scenario (e.g. NE2's 20 s).
     default_scenario : what the environment simulates by default (documentation).
+    fault_free : for an environment with communication faults on by default, the short name of its
+        fault-free counterpart: the same task with ``faults=None`` (``"tracking"`` for
+        ``"tracking_lossy"``; tested); None for the fault-free tasks.
     """
 
     name: str
@@ -44,6 +47,7 @@ class EnvEntry:
     gym_id: str
     t_end: float
     default_scenario: str
+    fault_free: str | None = None
 
     @property
     def max_episode_steps(self) -> int:
@@ -76,7 +80,8 @@ ENVIRONMENTS = _entries(
              "dobs_envs/Tracking-v0", 20.0, "NE2 (dobs_envs.scenarios.paper.ne2)"),
     EnvEntry("tracking_lossy", "dobs_envs.tracking_lossy_v0", "dobs_envs.envs.tracking:TrackingLossyEnv",
              "dobs_envs/TrackingLossy-v0", 20.0,
-             "NE2 with communication faults and sensor noise (dobs_envs.envs.tracking.TRACKING_LOSSY_FAULTS)"),
+             "NE2 with communication faults and sensor noise (dobs_envs.envs.tracking.TRACKING_LOSSY_FAULTS)",
+             fault_free="tracking"),
     EnvEntry("disturbance_rejection", "dobs_envs.disturbance_rejection_v0",
              "dobs_envs.envs.disturbance:DisturbanceRejectionEnv",
              "dobs_envs/DisturbanceRejection-v0", 20.0, "NE3 (dobs_envs.scenarios.paper.ne3)"),

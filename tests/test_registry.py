@@ -71,3 +71,16 @@ def test_env_layer_imports_neither_baselines_nor_reproduce():
                "print(sorted(m for m in sys.modules if m.split('.')[0] in ('baselines', 'agents')"
                " or m == 'dobs_envs.reproduce'))")
     assert out.strip() == "[]"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fault_free_names_the_counterpart_of_a_faulted_env(name):
+    """``fault_free`` is set exactly for the envs with communication faults on by default and names a registered
+    env without them (that the two are the same task: tests/test_baselines_faults.py)."""
+    e = registry.get(name)
+    faults = importlib.import_module(e.module).parallel_env(max_cycles=1).options.faults
+    assert (faults is not None) == (e.fault_free is not None)
+    if e.fault_free is not None:
+        ff = registry.get(e.fault_free)
+        assert ff.fault_free is None and ff.t_end == e.t_end
+        assert importlib.import_module(ff.module).parallel_env(max_cycles=1).options.faults is None
