@@ -118,7 +118,7 @@ class SearchSpace:
                           ("use_sde", "cat", (False, True)), ("net_arch", "cat", ("64x64", "128x128", "256x256"))]
         else:
             p = common + [("batch_size", "cat", (64, 128, 256, 512)), ("tau", "cat", (0.005, 0.01, 0.02, 0.05)),
-                          ("train_freq", "cat", (1, 4, 8, 16)), ("gradient_steps", "cat", (1, 4, 8, 16)),
+                          ("train_freq", "cat", (1, 4, 8, 16)), ("gradient_steps", "cat", (1, 2, 4, 8, 16)),
                           ("learning_starts", "cat", self.learning_starts),
                           ("net_arch", "cat", ("64x64", "256x256", "400x300"))]
             if self.algo == "sac":

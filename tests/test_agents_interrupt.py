@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from agents.benchmark import BUDGETS
+from agents.recipes import resolve_recipe
 from agents.runs import RunDirError, read_run_config, resume_point
 from proc_tree import alive as _alive, children as _children
 from agents.train import resume
@@ -237,8 +238,11 @@ def test_sac_interrupt_keeps_the_replay_buffer(tmp_path):
     assert os.path.exists(os.path.join(out, "replay_buffer.pkl"))
     spy = _AtStart()
     res = resume(out, progress=False, callbacks=[spy])
-    # n_envs = 1: one transition per step, but the step on which the stop was seen is not stored
-    assert spy.start[0] == done and spy.buffer == min(done - 1, 1000)
+    # SB3's buffer counts positions (one transition per copy each): done // n collects, but the one on which the
+    # stop was seen is not stored; capacity buffer_size // n positions
+    n = resolve_recipe("sac", "tracking").n_envs
+    assert n == 8 and done % n == 0  # the shipped recipe's copies (sac.yaml)
+    assert spy.start[0] == done and spy.buffer == min(done // n - 1, 1000 // n)
     assert res.config["status"] == "complete" and not os.path.exists(os.path.join(out, "replay_buffer.pkl"))
 
 
