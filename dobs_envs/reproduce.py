@@ -15,7 +15,7 @@ from .rollout import Trajectory, rollout, rollout_reference, window_stats
 from .scenarios.paper import PAPER_SCENARIOS
 
 #: studies run by ``dobs-envs reproduce <study>`` (:mod:`dobs_envs.studies`)
-STUDIES = ("convergence", "theorem6")
+STUDIES = ("convergence", "theorem6", "faults")
 
 __all__ = ["Trajectory", "simulate", "metrics", "reproduce", "add_parser"]
 
@@ -175,7 +175,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("reproduce", help="reproduce the paper's numerical examples (figures + metrics.json)")
     p.add_argument("scenario", choices=sorted(PAPER_SCENARIOS) + ["all"] + list(STUDIES),
                    help="a paper example, 'all' of them, or a study: 'convergence' (errors vs Euler step, "
-                        "log-log slopes) or 'theorem6' (NE3 residual over epsilon x gain scale)")
+                        "log-log slopes), 'theorem6' (NE3 residual over epsilon x gain scale) or 'faults' "
+                        "(NE2 under communication faults: exchange period, loss, delays, switching; 10 seeds)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--t-end", type=_positive_float, default=None,
                    help="horizon in seconds (default: the scenario's: NE1 30 s, NE2/NE3 20 s)")
@@ -206,7 +207,8 @@ def _check_out(args) -> None:
 
 
 def _run_study(args) -> int:
-    from .studies import convergence_study, theorem6_study
+    from .studies import convergence_study, faults_study, theorem6_study
+    from .studies.faults import summary as faults_summary
 
     for name, val in (("--t-end", args.t_end), ("--dt", args.dt)):
         if val is not None:
@@ -216,6 +218,8 @@ def _run_study(args) -> int:
         for name, d in res["scenarios"].items():
             sl = ", ".join(f"{k} {v:.2f}" for k, v in d["slopes"].items())
             print(f"{name:5s} slopes of log(error) vs log(dt): {sl}")
+    elif args.scenario == "faults":
+        print(faults_summary(faults_study(args.out, workers=args.workers)))
     else:
         res = theorem6_study(args.out, workers=args.workers)
         for variant in ("observer_based", "oracle"):

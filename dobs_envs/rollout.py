@@ -94,6 +94,18 @@ def _per_copy(name, val, default, batch):
     return a
 
 
+def _initial_x0(sc, x0, batch):
+    """``(batch, n)`` initial plant states: the scenario's ``x0``, or ``x0`` given as ``(n,)`` or ``(batch, n)``."""
+    if x0 is None:
+        return None
+    a = np.asarray(x0, dtype=float)
+    n = sc.n_states
+    if a.shape not in ((n,), (batch, n)) or not np.all(np.isfinite(a)):
+        raise ValueError(f"x0 must be finite with shape ({n},) or ({batch}, {n}) (one state per copy), "
+                         f"got shape {a.shape}")
+    return np.array(np.broadcast_to(a, (batch, n)))
+
+
 def _steps(sc, dt, t_end):
     dt = float(sc.dt if dt is None else dt)
     t_end = float(sc.t_end if t_end is None else t_end)
@@ -287,14 +299,14 @@ def _fault_setup(sc, params, faults, state, seeds):
 
 def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: int = 1, epsilon=None,
             phi_beta=None, oracle: bool = False, record_every: int = 1, faults=None,
-            fault_seed=0) -> list[Trajectory]:
+            fault_seed=0, x0=None) -> list[Trajectory]:
     """Compiled closed-loop runs of ``batch`` copies of scenario ``sc`` with its paper controller.
 
     Parameters
     ----------
     sc : Scenario
         The system, its observer design, controller (``sc.controller``) and printed initial
-        conditions (every copy starts from them).
+        conditions (every copy starts from them unless ``x0`` is given).
     dt, t_end : float, optional
         Euler step (= control period) and horizon (s); default the scenario's.
     batch : int
@@ -310,6 +322,9 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
         Communication faults (module doc; periods are Euler steps here); None: the ideal network.
     fault_seed : int or array_like (B,)
         The copies' fault seeds (:func:`fault_seeds`).
+    x0 : array_like (n,) or (B, n), optional
+        Initial plant states (one for every copy or one per copy); default the scenario's printed
+        ``x0``. The other initial conditions are the scenario's (``z_i(0) = 0``, ``gamma(0)``, ...).
 
     Returns
     -------
@@ -325,7 +340,7 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
     if stride < 1:
         raise ValueError(f"record_every must be >= 1, got {record_every}")
     params = sc.sim_params(dt=dt, substeps=1)
-    state = sc.initial_state(params, batch=batch)
+    state = sc.initial_state(params, x0=_initial_x0(sc, x0, batch), batch=batch)
     ctrl = paper_policy(sc)
     n, N, m = params.n_states, params.n_nodes, params.n_inputs
     law = law_arrays(ctrl, m, n)
@@ -362,7 +377,8 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
 
 
 def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None, oracle: bool = False,
-                      backend: str = "numpy", progress: bool = False, faults=None, fault_seed=0) -> Trajectory:
+                      backend: str = "numpy", progress: bool = False, faults=None, fault_seed=0,
+                      x0=None) -> Trajectory:
     """Reference implementation of :func:`rollout` (one copy, the scenario's own gains).
 
     A Python loop: per Euler step :func:`~dobs_envs.sim.estimates`, the controller's ``act``
@@ -371,12 +387,12 @@ def rollout_reference(sc, *, dt: float | None = None, t_end: float | None = None
     (:func:`~dobs_envs.sim.fault_state.faulted_estimates`), the C-O links
     (:func:`~dobs_envs.sim.fault_state.co_link_numpy`) and
     :func:`~dobs_envs.sim.numpy_step.control_period_faulted_numpy` (``backend`` ignored); the copy's
-    fault seed is ``fault_seeds(fault_seed, 1)``.
+    fault seed is ``fault_seeds(fault_seed, 1)``; ``x0 (n,)``: the initial plant state (default the printed one).
     """
     faults = Faults.from_value(faults)
     dt, t_end, steps = _steps(sc, dt, t_end)
     params = sc.sim_params(dt=dt, substeps=1)
-    state = sc.initial_state(params)
+    state = sc.initial_state(params, x0=_initial_x0(sc, x0, 1))
     if faults is not None:
         fa, fs, co_nodes = _fault_setup(sc, params, faults, state, fault_seeds(fault_seed, 1))
     ctrl = paper_policy(sc)
