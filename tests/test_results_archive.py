@@ -26,10 +26,21 @@ ARCHIVES = {
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
     # the budget's six PPO-family agents (README, full budget on tracking: the off-policy agents follow
     # at PPO's budget, issue 21)
+    # issue 22: today's PPO recipe and dobs-envs tune's best recipe (RECIPES), 10 runs each
+    "hetero_mas_tuned_runs.tar.gz": ("hetero_mas", "full", 20,
+                                     {"hetero_mas": "#### The tuned PPO recipe on hetero_mas (full budget)"}, ["ppo"]),
     "tracking_full_runs.tar.gz": ("tracking", "full", 60,
                                   {"tracking": "### RL versus the paper's controller (full budget, tracking)"},
                                   ["ppo", "ppo_ma", "ppo_sqrt", "ppo_res", "ppo_res_ma", "ppo_bc"]),
 }
+
+#: ``--recipe AGENT=FILE`` of an archive's command (paths relative to the repository)
+RECIPES = {"hetero_mas_tuned_runs.tar.gz": {"ppo": "results/hetero_mas_ppo_tuned.yml"}}
+
+
+def _recipes(name: str) -> dict | None:
+    r = RECIPES.get(name)
+    return None if r is None else {k: os.path.join(ROOT, v) for k, v in r.items()}
 
 
 @pytest.fixture(scope="module", params=sorted(ARCHIVES))
@@ -50,7 +61,7 @@ def test_every_stored_run_is_reused_with_todays_recipes(extracted):
     would then no longer be what the command gives (retrain, re-archive)."""
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]
-    plan = plan_runs(env, budget, out, agents=agents)
+    plan = plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))
     assert len(plan.specs) == runs
     assert [(sp["env"], sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
 
@@ -64,8 +75,8 @@ def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
 
     name, out = extracted
     env, budget, _, headings, agents = ARCHIVES[name]
-    assert pending_runs(plan_runs(env, budget, out, agents=agents)) == []  # or this would train for hours
-    run_benchmark(env, budget, out, workers=1, progress=False, agents=agents)
+    assert pending_runs(plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))) == []  # or hours of training
+    run_benchmark(env, budget, out, workers=1, progress=False, agents=agents, recipes=_recipes(name))
     for e, heading in headings.items():
         check_readme_table(heading, os.path.join(out, e, "results.json"), FORMER_ROWS.get(name, ()))
 
@@ -77,9 +88,9 @@ def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
 
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]
-    plan = plan_runs(env, budget, out, episodes=5, agents=agents)
+    plan = plan_runs(env, budget, out, episodes=5, agents=agents, recipes=_recipes(name))
     todo = pending_runs(plan)
     assert len(todo) == runs and len(replaced_runs(todo)) == runs and reevaluated_runs(plan) == []
     with pytest.raises(RunConflictError, match=f"{runs} finished run"):
-        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False, agents=agents)
-    assert pending_runs(plan_runs(env, budget, out, agents=agents)) == []  # nothing was touched
+        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False, agents=agents, recipes=_recipes(name))
+    assert pending_runs(plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))) == []  # nothing was touched
