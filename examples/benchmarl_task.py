@@ -2,7 +2,7 @@
 
 BenchMARL (https://github.com/facebookresearch/BenchMARL) defines tasks as a ``Task`` enum
 plus a ``TaskClass`` that builds the TorchRL environment; this module is such a pair for the
-four dobs_envs environments, wrapped by TorchRL's own ``PettingZooWrapper``. Parameter
+five registered dobs_envs environments (the four tasks and ``tracking_lossy``), wrapped by TorchRL's own ``PettingZooWrapper``. Parameter
 sharing (BenchMARL's default, one group ``controller`` holding every controller node) needs
 identical agent spaces, so the default task config turns on ``normalized_actions`` and
 ``padded_observations``. Usage (one MAPPO iteration; see tests/clients_heavy/test_benchmarl.py)::
@@ -101,6 +101,7 @@ class DobsEnvsTask(Task):
     """The dobs_envs environments as BenchMARL tasks (``DobsEnvsTask.TRACKING.get_task(config)``)."""
 
     TRACKING = None
+    TRACKING_LOSSY = None
     DISTURBANCE_REJECTION = None
     HETERO_MAS = None
     RANDOM_NETWORK = None

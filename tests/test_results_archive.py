@@ -26,6 +26,9 @@ ARCHIVES = {
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
     # the budget's six PPO-family agents (README, full budget on tracking: the off-policy agents follow
     # at PPO's budget, issue 21)
+    # issue 23: the faulted environment, the quick budget's agents
+    "tracking_lossy_quick_runs.tar.gz": ("tracking_lossy", "quick", 12,
+                                         {"tracking_lossy": "#### tracking_lossy (quick budget)"}, None),
     # issue 22: today's PPO recipe and dobs-envs tune's best recipe (RECIPES), 10 runs each
     "hetero_mas_tuned_runs.tar.gz": ("hetero_mas", "full", 20,
                                      {"hetero_mas": "#### The tuned PPO recipe on hetero_mas (full budget)"}, ["ppo"]),
