@@ -142,6 +142,24 @@ class Recording(NamedTuple):
     beta: np.ndarray  # (B, R, Nc)
 
 
+@numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy", inline="always")
+def _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta):
+    """Sample ``s`` of copy ``b``: state, reference state, each node's estimation error ``||xhat_i - x||``
+    and the adaptive gains (shared by both rollout kernels)."""
+    N, n = xhat.shape
+    rec.x[b, s] = xb
+    rec.x_r[b, s] = x_r[b]
+    for i in range(N):
+        e2 = 0.0
+        for c in range(n):
+            d = xhat[i, c] - xb[c]
+            e2 += d * d
+        rec.est_err[b, s, i] = np.sqrt(e2)
+    rec.gamma[b, s] = gamma[b]
+    rec.gamma_s[b, s] = gamma_s[b]
+    rec.beta[b, s] = beta[b]
+
+
 @numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
     """Run ``loop.steps`` Euler steps of every copy in place (state ``x .. x_r``, controller gains
@@ -177,17 +195,7 @@ def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
                         acc += G_bar[i, c, q] * y[q]
                     xhat[i, c] = acc
             if record:
-                rec.x[b, s] = xb
-                rec.x_r[b, s] = x_r[b]
-                for i in range(N):
-                    e2 = 0.0
-                    for c in range(n):
-                        d = xhat[i, c] - xb[c]
-                        e2 += d * d
-                    rec.est_err[b, s, i] = np.sqrt(e2)
-                rec.gamma[b, s] = gamma[b]
-                rec.gamma_s[b, s] = gamma_s[b]
-                rec.beta[b, s] = beta[b]
+                _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta)
             if k < steps:
                 law_copy(law, xhat, xb, oracle, ref[k], cmd[k], beta[b], eps[b], phi_beta[b], decay, gain, u[b], w)
                 for j in range(m):
@@ -249,17 +257,7 @@ def _rollout_kernel_faulted(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loo
                 for c in range(n):
                     xl[co_nodes[l], c] = co_held_a[b, l, c]
             if record:
-                rec.x[b, s] = xb
-                rec.x_r[b, s] = x_r[b]
-                for i in range(N):
-                    e2 = 0.0
-                    for c in range(n):
-                        d = xhat[i, c] - xb[c]
-                        e2 += d * d
-                    rec.est_err[b, s, i] = np.sqrt(e2)
-                rec.gamma[b, s] = gamma[b]
-                rec.gamma_s[b, s] = gamma_s[b]
-                rec.beta[b, s] = beta[b]
+                _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta)
             if k < steps:
                 law_copy(law, xl, xb, oracle, ref[k], cmd[k], beta[b], eps[b], phi_beta[b], decay, gain, u[b], w)
                 for j in range(m):
