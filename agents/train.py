@@ -53,13 +53,26 @@ __all__ = ["train", "resume", "resume_point", "load_agent", "TrainedAgent", "Tra
            "ResumePoint", "RUNNING", "INTERRUPTED", "COMPLETE"]
 
 
+#: XLA's CPU flags for one thread (read when JAX creates its CPU client, i.e. at the first JAX computation)
+XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
+
+
 def set_threads(threads: int | None = 1) -> None:
     """``torch.set_num_threads`` (1 by default: small MLPs on 2-core machines are ~10x
-    faster single-threaded)."""
+    faster single-threaded), and with ``threads=1`` XLA single-threaded too (SBX, the ``jax``
+    extra): without it every training process of the benchmark runs a thread pool the size of the
+    machine, and two workers on two cores contend. The XLA flags are added to ``XLA_FLAGS``
+    (kept if the user set them) and take effect only if JAX has not computed anything yet in this
+    process; the benchmark's workers call this before building a model."""
     import torch
 
     if threads:
         torch.set_num_threads(int(threads))
+    if threads == 1:
+        flags = os.environ.get("XLA_FLAGS", "")
+        missing = [f for f in XLA_ONE_THREAD if f.split("=")[0] not in flags]
+        if missing:
+            os.environ["XLA_FLAGS"] = " ".join([flags, *missing]).strip()
 
 
 class TqdmCallback:

@@ -236,3 +236,28 @@ def test_noise_type_in_recipes():
     assert r.action_noise_type == "ornstein-uhlenbeck"
     assert resolve_recipe("td3", "tracking", overrides={"noise_type": None}).action_noise_sigma is None
     assert resolve_recipe("ppo", "tracking", overrides={"noise_type": "normal"}).action_noise_sigma is None
+
+
+@pytest.mark.skipif(importlib.util.find_spec("jax") is None, reason="the jax extra is not installed")
+@pytest.mark.parametrize("user_flags", [None, "--xla_cpu_multi_thread_eigen=true"])
+def test_one_thread_also_for_xla(user_flags):
+    """set_threads(1) makes a training process single-threaded in XLA too (SBX), keeping flags the user
+    set; XLA aborts on flags it does not know, so the JAX computation afterwards checks the spelling."""
+    code = textwrap.dedent("""
+        import os
+        from agents.train import set_threads
+        set_threads(1)
+        set_threads(1)  # idempotent
+        import jax.numpy as jnp
+        assert float(jnp.arange(4.0).sum()) == 6.0
+        print(os.environ["XLA_FLAGS"])
+    """)
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    if user_flags:
+        env["XLA_FLAGS"] = user_flags
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    flags = out.stdout.split()
+    assert flags.count("intra_op_parallelism_threads=1") == 1
+    eigen = [f for f in flags if f.startswith("--xla_cpu_multi_thread_eigen")]
+    assert eigen == [user_flags or "--xla_cpu_multi_thread_eigen=false"]
