@@ -23,9 +23,10 @@ same sparse products, the same stable-step test and split steps, "Stable steps" 
   (``oo_period=None``, no delay) the received copies are refreshed at every shortened step of a
   split Euler step too.
 
-After the period :func:`_draws_copy` makes the next period's draws (graph chain, burst chains,
+After the period :func:`_draws_rows` makes the next period's draws (graph chain, burst chains,
 noise) and advances the period counter, as :func:`~dobs_envs.sim.fault_state.period_draws`.
-:func:`co_link_row` is the C-O link of one copy at a control-period boundary.
+:func:`co_link_rows` is the C-O link of a range of copies at their control-period boundaries
+(:func:`co_link_row` of one copy).
 
 The arithmetic is the compiled kernel's (sparse sums in column order, FMA contraction allowed:
 :data:`~dobs_envs.sim.period_kernel.FASTMATH`), so the continuous state agrees with the numpy
@@ -58,6 +59,7 @@ _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy
 _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
 
 __all__ = ["unpack_fault_args", "loss_key", "delivers", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
+           "co_link_rows",
            "control_period_faulted_compiled", "co_link_compiled", "FAULT_STATE_FIELDS"]
 
 #: the order of the fault-state tuple the kernels receive (``tuple(FaultState)``)
@@ -129,7 +131,7 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
 
     ``fa`` the unpacked :class:`FaultArgs`; ``fs`` the fault-state tuple (its received copies and
     snapshot ring of copy ``b`` are updated; the period's draws are read, not advanced: see
-    :func:`_draws_copy`); ``delivered (B, E)`` bool receives the period's deliveries (links of the
+    :func:`_draws_rows`); ``delivered (B, E)`` bool receives the period's deliveries (links of the
     active graph that did not lose their packets); ``sc``/``fsc`` work arrays
     (:func:`~dobs_envs.sim.period_kernel._scratch_copy`, :func:`_scratch_fault`).
     """
@@ -289,68 +291,87 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
 
 
 @_njit
-def _draws_copy(b, fa, fs):
-    """The draws of copy ``b``'s next period and its period counter ``+ 1`` (as
-    :func:`~dobs_envs.sim.fault_state.period_draws` for a period after the first)."""
+def _draws_rows(lo, hi, fa, fs):
+    """The draws of the next period of copies ``lo .. hi-1`` and their period counters ``+ 1`` (as
+    :func:`~dobs_envs.sim.fault_state.period_draws` for a period after the first). One call for the range:
+    the arrays are taken out of the tuples once, not per copy (each per-copy call cost atomic reference
+    count updates of every array it unpacked)."""
     seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
-    seed = seed_a[b]
-    kn = period_a[b] + 1
-    period_a[b] = kn
-    ku = np.uint64(kn)
-    if fa.switching:
-        g = graph_a[b]
-        cum = fa.cum_transition[g]
-        G = cum.shape[0]
-        thr = frng.uniform_at(frng.period_key(seed, _SWITCHING, ku), _U0) * cum[G - 1]
-        nxt = 0
-        for c in range(G):
-            if cum[c] <= thr:
-                nxt += 1
-        last = fa.last_state[g]
-        graph_a[b] = nxt if nxt < last else last
-    else:
-        graph_a[b] = 0
+    cum_transition, last_state = fa.cum_transition, fa.last_state
+    noise_mask = fa.noise_mask
+    switching, burst = fa.switching, fa.burst
+    p_bad_good, p_good_bad, noise_std = fa.p_bad_good, fa.p_good_bad, fa.noise_std
     E = fa.sender.shape[0]
-    if fa.burst:
-        key = frng.period_key(seed, _OO_BURST, ku)
-        for e in range(E):
-            uu = frng.uniform_at(key, np.uint64(e))
-            if bad_a[b, e]:
-                bad_a[b, e] = uu >= fa.p_bad_good  # stays bad unless it recovers
-            else:
-                bad_a[b, e] = uu < fa.p_good_bad
-    else:
-        for e in range(E):
-            bad_a[b, e] = False
-    if fa.noise_std > 0.0:
-        N, P = fa.noise_mask.shape
-        key = frng.period_key(seed, _NOISE, ku)
-        for i in range(N):
-            for q in range(P):
-                zq = frng.normal_at(key, np.uint64(i * P + q))
-                noise_a[b, i, q] = fa.noise_std * zq * fa.noise_mask[i, q]
+    N, P = noise_mask.shape
+    G = cum_transition.shape[1]
+    for b in range(lo, hi):
+        seed = seed_a[b]
+        kn = period_a[b] + 1
+        period_a[b] = kn
+        ku = np.uint64(kn)
+        if switching:
+            g = graph_a[b]
+            thr = frng.uniform_at(frng.period_key(seed, _SWITCHING, ku), _U0) * cum_transition[g, G - 1]
+            nxt = 0
+            for c in range(G):
+                if cum_transition[g, c] <= thr:
+                    nxt += 1
+            last = last_state[g]
+            graph_a[b] = nxt if nxt < last else last
+        else:
+            graph_a[b] = 0
+        if burst:
+            key = frng.period_key(seed, _OO_BURST, ku)
+            for e in range(E):
+                uu = frng.uniform_at(key, np.uint64(e))
+                if bad_a[b, e]:
+                    bad_a[b, e] = uu >= p_bad_good  # stays bad unless it recovers
+                else:
+                    bad_a[b, e] = uu < p_good_bad
+        else:
+            for e in range(E):
+                bad_a[b, e] = False
+        if noise_std > 0.0:
+            key = frng.period_key(seed, _NOISE, ku)
+            for i in range(N):
+                for q in range(P):
+                    zq = frng.normal_at(key, np.uint64(i * P + q))
+                    noise_a[b, i, q] = noise_std * zq * noise_mask[i, q]
 
 
 @_njit
 def _scratch_fault_tile(fa, N, n, p, W):
     """Per-lane fault arrays of :func:`_tile_faulted`: received copies ``REC (E, n, W)``, noise ``NZ (N, p, W)``,
-    degrees ``DEG (N, W)``, link weights ``WL (E, W)``, deliveries ``DL (E, W)``, periods ``KP (W,)``,
-    broadcast flags ``BC (W,)``; with ``oo_delay > 0`` the period's snapshots ``TSN (nb, N, n, W)``, their ring
-    slots ``TSLOT (nb, W)`` and counts ``TCNT (W,)`` (``nb`` the most broadcasts in a period); a lane mask
-    ``MK (W,)``."""
+    degrees ``DEG (N, W)``, link weights ``WL (E, W)``, deliveries ``DL (E, W)``, periods ``KP (W,)``, the
+    Euler step count of the period's start modulo ``exchange_steps`` ``PH (W,)``, broadcast flags ``BC (W,)``;
+    with ``oo_delay > 0`` the period's snapshots ``TSN (nb, N, n, W)``, their ring slots ``TSLOT (nb, W)`` and
+    counts ``TCNT (W,)`` (``nb`` the most broadcasts in a period); a lane mask ``MK (W,)``; the links into each
+    node, ``LK[LP[i]:LP[i+1]]`` in increasing order (without faults switching graphs: only those of nonzero
+    weight)."""
     E = fa.sender.shape[0]
     nb = fa.substeps // fa.exchange_steps + 1 if fa.lag > 0 else 0
+    LK = np.empty(E, dtype=np.int64)
+    LP = np.zeros(N + 1, dtype=np.int64)
+    t = 0
+    for i in range(N):
+        LP[i] = t
+        for e in range(E):
+            if fa.receiver[e] == i and (fa.switching or fa.weight[0, e] != 0.0):
+                LK[t] = e
+                t += 1
+    LP[N] = t
     return (np.empty((E, n, W)), np.zeros((N, p, W)), np.empty((N, W)), np.empty((E, W)),
-            np.zeros((E, W), dtype=np.bool_), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.bool_),
+            np.zeros((E, W), dtype=np.bool_), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.int64),
+            np.zeros(W, dtype=np.bool_),
             np.empty((nb, N, n, W)), np.zeros((nb, W), dtype=np.int64), np.zeros(W, dtype=np.int64),
-            np.zeros(W, dtype=np.bool_))
+            np.zeros(W, dtype=np.bool_), LK, LP)
 
 
 @_njit
 def _gather_fault(ft, lo, nl, fa, fs, N, p):
     """The fault state of copies ``lo .. lo+nl-1`` into the tile arrays ``ft`` (lanes past ``nl`` repeat the
     last copy), with each lane's deliveries of the period (:func:`delivers`)."""
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
+    REC, NZ, DEG, WL, DL, KP, PH, BC, TSN, TSLOT, TCNT, MK, LK, LP = ft
     seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
     W = KP.shape[0]
     E, n = REC.shape[0], REC.shape[1]
@@ -387,7 +408,7 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
     phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
     dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
     Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
+    REC, NZ, DEG, WL, DL, KP, PH, BC, TSN, TSLOT, TCNT, MK, LK, LP = ft
     snapshots_a = fs[3]
     sender, receiver = fa.sender, fa.receiver
     E = sender.shape[0]
@@ -400,6 +421,7 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
     switching = fa.switching
     for c in range(W):
         FL[c] = 0.0
+        PH[c] = (KP[c] * substeps) % M  # once per period: no integer division per lane and Euler step
     for i in range(N):
         for k in range(n):
             _tile_dot(BU[i, k], None, rows.B_bar, i * n + k, U, W)
@@ -415,10 +437,13 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
                         Y[i, q, c] = Y[i, q, c] + NZ[i, q, c]
             for k in range(n):
                 _tile_dot(XH[i, k], Z[i, k], rows.G_bar, i * n + k, Y[i], W)
-        # broadcasts (per lane: its own Euler step count s = k S + j)
+        # broadcasts (per lane: its own Euler step count s = k S + j): s % M == 0 exactly when
+        # PH + j % M (both in [0, M)) is 0 or M
+        jm = j % M
         any_bc = False
         for c in range(W):
-            bc = continuous or (KP[c] * substeps + j) % M == 0
+            ph = PH[c] + jm
+            bc = continuous or ph == 0 or ph == M
             BC[c] = bc
             any_bc = any_bc or bc
         if any_bc:
@@ -449,23 +474,50 @@ def _tile_faulted(X, Z, G, GS, V, XR, U, R, ka, work, W, fa, ft, fs, lo):
                         for c in range(W):
                             REC[e, k, c] = XH[js, k, c] if MK[c] else REC[e, k, c]
         # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as period_copy_faulted)
-        for i in range(N):
-            for k in range(n):
-                for c in range(W):
-                    D[i, k, c] = 0.0
-        for e in range(E):
-            ir = receiver[e]
-            if switching:  # the lanes' graphs differ: a select per lane
+        if switching:  # the lanes' graphs differ: a select per lane
+            for i in range(N):
+                for k in range(n):
+                    for c in range(W):
+                        D[i, k, c] = 0.0
+            for e in range(E):
+                ir = receiver[e]
                 for k in range(n):
                     for c in range(W):
                         a = WL[e, c]
                         D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
-            else:  # one graph: the link's weight is every lane's
-                a = fa.weight[0, e]
-                if a != 0.0:
-                    for k in range(n):
+        else:  # one graph: the link's weight is every lane's; node i's links LK[LP[i]:LP[i+1]] (increasing e),
+            # up to two per pass over the lanes: ((0 + a_0 t_0) + a_1 t_1) + ..., the sums of period_copy_faulted
+            weight = fa.weight
+            for i in range(N):
+                l0, l1 = LP[i], LP[i + 1]
+                for k in range(n):
+                    if l0 == l1:
                         for c in range(W):
-                            D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c])
+                            D[i, k, c] = 0.0
+                    j = l0
+                    while j < l1:
+                        e0 = LK[j]
+                        a0 = weight[0, e0]
+                        if j + 1 < l1:
+                            e1 = LK[j + 1]
+                            a1 = weight[0, e1]
+                            if j == l0:
+                                for c in range(W):
+                                    xh = XH[i, k, c]
+                                    D[i, k, c] = 0.0 + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                            else:
+                                for c in range(W):
+                                    xh = XH[i, k, c]
+                                    D[i, k, c] = D[i, k, c] + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                            j += 2
+                        else:
+                            if j == l0:
+                                for c in range(W):
+                                    D[i, k, c] = 0.0 + a0 * (XH[i, k, c] - REC[e0, k, c])
+                            else:
+                                for c in range(W):
+                                    D[i, k, c] = D[i, k, c] + a0 * (XH[i, k, c] - REC[e0, k, c])
+                            j += 1
         for i in range(N):
             for c_ in range(rq):
                 _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
@@ -544,7 +596,7 @@ def _scatter_faulted(state, ft, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, 
     """Copies ``lo .. lo+nl-1`` and their received copies back from the tile, except lanes flagged by the
     stability test: those are advanced again from their unchanged batch rows by :func:`period_copy_faulted`."""
     X, Z, G, GS, V, XR, U, R = state
-    REC, NZ, DEG, WL, DL, KP, BC, TSN, TSLOT, TCNT, MK = ft
+    REC, NZ, DEG, WL, DL, KP, PH, BC, TSN, TSLOT, TCNT, MK, LK, LP = ft
     received_a, snapshots_a = fs[2], fs[3]
     N, n = Z.shape[0], Z.shape[1]
     E = REC.shape[0]
@@ -604,35 +656,45 @@ def advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliver
         b += nl
     for c in range(b, hi):
         period_copy_faulted(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, delivered, sc, fsc)
-    for c in range(lo, hi):
-        _draws_copy(c, fa, fs)
+    _draws_rows(lo, hi, fa, fs)
+
+
+@_njit
+def co_link_rows(lo, hi, X, xoff, o, co_nodes, fa, fs, received):
+    """The C-O links of copies ``lo .. hi-1``, each at the boundary of its period ``fs.period[b]`` (as
+    :func:`~dobs_envs.sim.fault_state.co_link_numpy`): link ``l`` of copy ``b`` sends node
+    ``co_nodes[l]``'s estimate, ``X[b - xoff, o + co_nodes[l] n : ... + n]`` (``X`` 2-D, the estimates
+    flat from column ``o``, node ``i`` at ``o + i n``), into the ring ``co_sent``; unless lost
+    (probability ``co_loss``; ``received[b, l]`` = not lost), ``co_held[b, l]`` becomes what was sent
+    ``co_delay`` boundaries before. One call for the range (the arrays are taken out of the tuples once)."""
+    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent, co_held = _fields(fs)
+    co_delay, co_loss = fa.co_delay, fa.co_loss
+    Lc = co_delay + 1
+    n = co_held.shape[2]
+    for b in range(lo, hi):
+        k = period_a[b]
+        slot = k % Lc
+        src = (k - co_delay) % Lc
+        xr = b - xoff
+        key = frng.period_key(seed_a[b], _CO_LOSS, np.uint64(k))
+        for l in range(co_nodes.shape[0]):
+            i = o + co_nodes[l] * n
+            for c in range(n):
+                co_sent[b, slot, l, c] = X[xr, i + c]
+            lost = False
+            if co_loss > 0.0:
+                lost = frng.uniform_at(key, np.uint64(l)) < co_loss
+            received[b, l] = not lost
+            if not lost:
+                for c in range(n):
+                    co_held[b, l, c] = co_sent[b, src, l, c]
 
 
 @_njit
 def co_link_row(b, xhat, co_nodes, fa, fs, received):
-    """The C-O links of copy ``b`` at the boundary of its period ``fs.period[b]`` (as
-    :func:`~dobs_envs.sim.fault_state.co_link_numpy`): link ``l`` sends ``xhat[co_nodes[l]]``
-    (``xhat`` flat ``(N n,)``, node ``i`` at ``i n``) into the ring ``co_sent``; unless lost
-    (probability ``co_loss``; ``received[b, l]`` = not lost), ``co_held[b, l]`` becomes what was
-    sent ``co_delay`` boundaries before."""
-    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent, co_held = _fields(fs)
-    Lc = fa.co_delay + 1
-    k = period_a[b]
-    slot = k % Lc
-    src = (k - fa.co_delay) % Lc
-    n = co_held.shape[2]
-    key = frng.period_key(seed_a[b], _CO_LOSS, np.uint64(k))
-    for l in range(co_nodes.shape[0]):
-        i = co_nodes[l] * n
-        for c in range(n):
-            co_sent[b, slot, l, c] = xhat[i + c]
-        lost = False
-        if fa.co_loss > 0.0:
-            lost = frng.uniform_at(key, np.uint64(l)) < fa.co_loss
-        received[b, l] = not lost
-        if not lost:
-            for c in range(n):
-                co_held[b, l, c] = co_sent[b, src, l, c]
+    """The C-O links of copy ``b`` at the boundary of its period (:func:`co_link_rows`; ``xhat`` flat
+    ``(N n,)``, node ``i`` at ``i n``)."""
+    co_link_rows(b, b + 1, xhat.reshape((1, xhat.shape[0])), b, 0, co_nodes, fa, fs, received)
 
 
 @_njit
@@ -665,9 +727,7 @@ def control_period_faulted_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p, fa, f
 
 @_njit
 def _co_link(sent, co_nodes, FF, FI, fs, received):
-    fa = unpack_fault_args(FF, FI)
-    for b in range(sent.shape[0]):
-        co_link_row(b, sent[b], co_nodes, fa, fs, received)
+    co_link_rows(0, sent.shape[0], sent, 0, 0, co_nodes, unpack_fault_args(FF, FI), fs, received)
 
 
 def co_link_compiled(xhat, co_nodes, fs: FaultState, fa, received=None):
