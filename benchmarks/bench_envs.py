@@ -1,7 +1,7 @@
 """Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and today's main.
 
 Usage: python benchmarks/bench_envs.py [--main /work/main] [--repeats 7] [--seconds 0.4] [--no-main]
-       [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024] [--faults lossy|none|JSON]
+       [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024] [--faults lossy|none|JSON] [--clock wall|cpu]
 
 Everything is measured side by side in one run, interleaved (config A, B, C, ..., A, B, C,
 ...), best of ``--repeats`` short runs of about ``--seconds`` each (the machines are shared
@@ -20,6 +20,11 @@ with training runs: only ratios measured this way mean anything):
   ``faults=`` (``--faults``: ``lossy``, the default, is ``tracking_lossy_v0``'s setting; a JSON dict;
   ``none`` skips it), serial and threaded, and its ratio to the same env without faults (target
   >= 0.7x).
+
+``--clock cpu`` times the single-threaded runs (single envs, ``threads=1`` vector envs, the other
+checkout's worker) by their process's CPU time (``time.process_time``) instead of the wall clock: on a
+machine busy with other work, the time the run computes, not the time it waits for a core. The
+threaded runs stay on the wall clock (the CPU time of several threads is not their throughput).
 
 It also reports the floating-point operations of one control step (simulation kernel +
 features/reward, counted from the kernels' loops) and the fraction of the 2-core FMA peak the
@@ -48,6 +53,7 @@ import gymnasium as gym
 import dobs_envs
 from dobs_envs.registry import ENVIRONMENTS
 ENV_ID = sys.argv[1]
+now = time.process_time if sys.argv[2] == "cpu" else time.perf_counter
 genv = gym.make(ENV_ID)
 penv = importlib.import_module(next(e.module for e in ENVIRONMENTS.values() if e.gym_id == ENV_ID)).parallel_env()
 rng = np.random.default_rng(0)
@@ -56,19 +62,19 @@ gpool = [genv.action_space.low + (genv.action_space.high - genv.action_space.low
 ppool = [{a: g[k:k + 1] for k, a in enumerate(penv.possible_agents)} for g in gpool]
 genv.reset(seed=0); penv.reset(seed=0)
 def run_gym(n):
-    t0 = time.perf_counter()
+    t0 = now()
     for k in range(n):
         _, _, te, tr, _ = genv.step(gpool[k % 512])
         if te or tr:
             genv.reset()
-    return n / (time.perf_counter() - t0)
+    return n / (now() - t0)
 def run_pz(n):
-    t0 = time.perf_counter()
+    t0 = now()
     for k in range(n):
         if not penv.agents:
             penv.reset()
         penv.step(ppool[k % 512])
-    return n / (time.perf_counter() - t0)
+    return n / (now() - t0)
 vecs = {}
 def run_vec(B, n):
     if B not in vecs:
@@ -78,10 +84,10 @@ def run_vec(B, n):
         vecs[B] = (v, [v.action_space.low + (v.action_space.high - v.action_space.low)
                        * r.random(v.action_space.shape).astype(np.float32) for _ in range(8)])
     v, acts = vecs[B]
-    t0 = time.perf_counter()
+    t0 = now()
     for k in range(n):
         v.step(acts[k % 8])
-    return n * B / (time.perf_counter() - t0)
+    return n * B / (now() - t0)
 run_gym(500); run_pz(500)
 print(json.dumps({"file": dobs_envs.__file__}), flush=True)
 for line in sys.stdin:
@@ -96,10 +102,11 @@ for line in sys.stdin:
 class Worker:
     """The single envs of a checkout in a subprocess (that checkout first on sys.path)."""
 
-    def __init__(self, checkout: str, env_id: str = ENV_ID):
+    def __init__(self, checkout: str, env_id: str = ENV_ID, clock: str = "wall"):
         env = dict(os.environ, PYTHONPATH=checkout, PYTHONDONTWRITEBYTECODE="1",
                    NUMBA_CACHE_DIR=os.path.join(tempfile.gettempdir(), "dobs_bench_numba_" + checkout.strip("/").replace("/", "_")))
-        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, env_id], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, env_id, clock], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE,
                                      text=True, env=env, cwd=tempfile.gettempdir())
         self.file = json.loads(self.proc.stdout.readline())["file"]
 
@@ -140,8 +147,13 @@ def main(argv=None):
     ap.add_argument("--env-id", default=ENV_ID, help="registered Gymnasium id of the env to time")
     ap.add_argument("--faults", default="lossy", help="fault setting of the faulted vector env: 'lossy' "
                     "(tracking_lossy_v0's), 'none' (not timed) or a JSON dict of faults keys")
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="time the single-threaded runs by the wall clock or by the process's CPU time "
+                         "(process_time: on a loaded machine, not the time a run waits for a core); threaded "
+                         "runs always by the wall clock")
     args = ap.parse_args(argv)
     env_id = args.env_id
+    now = time.process_time if args.clock == "cpu" else time.perf_counter
 
     import gymnasium as gym
 
@@ -163,20 +175,20 @@ def main(argv=None):
     penv.reset(seed=0)
 
     def run_gym(n):
-        t0 = time.perf_counter()
+        t0 = now()
         for k in range(n):
             _, _, te, tr, _ = genv.step(gpool[k % POOL])
             if te or tr:
                 genv.reset()
-        return n / (time.perf_counter() - t0)
+        return n / (now() - t0)
 
     def run_pz(n):
-        t0 = time.perf_counter()
+        t0 = now()
         for k in range(n):
             if not penv.agents:
                 penv.reset()
             penv.step(ppool[k % POOL])
-        return n / (time.perf_counter() - t0)
+        return n / (now() - t0)
 
     from dobs_envs.envs.tracking import TRACKING_LOSSY_FAULTS
 
@@ -196,12 +208,13 @@ def main(argv=None):
 
     def run_vec(key, n):
         v, acts = vec[key]
-        t0 = time.perf_counter()
+        clock = time.perf_counter if key[1] else now  # threaded: wall clock
+        t0 = clock()
         for k in range(n):
             v.step(acts[k % 8])
-        return n * key[0] / (time.perf_counter() - t0)
+        return n * key[0] / (clock() - t0)
 
-    worker = None if args.no_main else Worker(args.main, env_id)
+    worker = None if args.no_main else Worker(args.main, env_id, args.clock)
     configs = {"gym single (this checkout)": ("gym", None), "PettingZoo single (this checkout)": ("pz", None)}
     if worker is not None:
         configs["gym single (main)"] = ("gym", "main")
@@ -242,7 +255,8 @@ def main(argv=None):
     peak, peak_desc = peak_flops()
     single = best["gym single (this checkout)"]
     print(f"{env_id} ({core.scenario.name}, n={core.n_states}, N={core.n_nodes}, {core.substeps} Euler substeps per control step), "
-          f"best of {args.repeats} interleaved runs of ~{args.seconds:g} s")
+          f"best of {args.repeats} interleaved runs of ~{args.seconds:g} s"
+          + (" (CPU time of the single-threaded runs, wall clock of the threaded ones)" if args.clock == "cpu" else ""))
     print(f"{'configuration':36s} {'env-steps/s':>13s} {'x gym single':>13s}")
     for name in configs:
         print(f"{name:36s} {best[name]:13,.0f} {best[name] / single:13.2f}")

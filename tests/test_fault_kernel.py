@@ -177,6 +177,30 @@ def test_co_link_matches_numpy(faults):
     assert (n_lost > 0) == (fa.co_loss > 0)
 
 
+@pytest.mark.parametrize("case", ["all", "burst", "switching", "noise", "ideal"])
+def test_period_draws_compiled_match_numpy(case):
+    """The compiled period draws (the environments' resets; the kernels' next-period draws) are bitwise
+    :func:`~dobs_envs.sim.fault_state.period_draws`: the first period (initial graph, stationary burst
+    states) and later ones (chain steps from given graphs and burst states), noise included."""
+    from dobs_envs.sim.fault_kernel import period_draws_compiled
+
+    prm, state, rng = _ne2(B=2)
+    fa = fault_args(Faults.from_value(CASES[case]), prm)
+    B, E, G = 200, fa.sender.shape[0], fa.weight.shape[0]
+    seeds = np.concatenate([np.arange(100, dtype=np.uint64), rng.integers(0, 2**64, 100, dtype=np.uint64)])
+    for period in (np.zeros(B, dtype=np.int64), rng.integers(1, 1000, B)):
+        graph_prev = rng.integers(0, G, B)
+        bad_prev = rng.random((B, E)) < 0.5
+        want = fstate.period_draws(fa, seeds, period, graph_prev, bad_prev)
+        got = period_draws_compiled(fa, seeds, period, graph_prev, bad_prev)
+        for name, w, g in zip(("graph", "bad", "noise"), want, got):
+            assert g.dtype == np.asarray(w).dtype and g.shape == np.shape(w), name
+            np.testing.assert_array_equal(g, w, err_msg=name)
+    st = init_fault_state(prm, fa, state[0], state[1], [3, 2**63 + 1], draws=period_draws_compiled)
+    for a, b in zip(st, init_fault_state(prm, fa, state[0], state[1], [3, 2**63 + 1])):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_fault_state_tuple_order():
     """The kernels unpack the fault state positionally: the declaration order they assume."""
     from dobs_envs.sim.fault_kernel import FAULT_STATE_FIELDS

@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
+from functools import partial
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -60,6 +61,7 @@ import numpy as np
 from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric, check_seed
 from ..sim import SimParams, SimState
 from ..packing import pack
+from ..sim.fault_kernel import period_draws_compiled
 from ..sim.fault_state import fault_args, init_fault_state
 from ..sim.kernel_args import StateArrays
 from .calibration import auto_action_bound
@@ -473,7 +475,8 @@ class EnvCore:
         self._x[rows], self._xr[rows], self._v[rows] = X0, xr0, V0
         self._z[rows], self._g[rows], self._gs[rows], self._t[rows] = 0.0, sc.gamma0, sc.gamma_s0, 0.0
         if faulty:
-            fs = init_fault_state(self.params, self._fa, X0, self._z[rows], fseeds, co_nodes=self._fconsts[0])
+            fs = init_fault_state(self.params, self._fa, X0, self._z[rows], fseeds, co_nodes=self._fconsts[0],
+                                  draws=partial(period_draws_compiled, packed=self._FP))
             for dst, src in zip(self._fs, fs):
                 dst[rows] = src
         self._cycles[rows] = 0

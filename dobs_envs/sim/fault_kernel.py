@@ -24,7 +24,8 @@ same sparse products, the same stable-step test and split steps, "Stable steps" 
   split Euler step too.
 
 After the period :func:`_draws_rows` makes the next period's draws (graph chain, burst chains,
-noise) and advances the period counter, as :func:`~dobs_envs.sim.fault_state.period_draws`.
+noise) and advances the period counter, as :func:`~dobs_envs.sim.fault_state.period_draws`
+(:func:`period_draws_compiled`: the same draws for any periods, e.g. the first at a reset).
 :func:`co_link_rows` is the C-O link of a range of copies at their control-period boundaries
 (:func:`co_link_row` of one copy).
 
@@ -59,7 +60,7 @@ _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy
 _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
 
 __all__ = ["unpack_fault_args", "loss_key", "delivers", "period_copy_faulted", "advance_rows_faulted", "co_link_row",
-           "co_link_rows",
+           "co_link_rows", "period_draws_compiled",
            "control_period_faulted_compiled", "co_link_compiled", "FAULT_STATE_FIELDS"]
 
 #: the order of the fault-state tuple the kernels receive (``tuple(FaultState)``)
@@ -291,25 +292,30 @@ def period_copy_faulted(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, fa, fs, deliv
 
 
 @_njit
-def _draws_rows(lo, hi, fa, fs):
-    """The draws of the next period of copies ``lo .. hi-1`` and their period counters ``+ 1`` (as
-    :func:`~dobs_envs.sim.fault_state.period_draws` for a period after the first). One call for the range:
-    the arrays are taken out of the tuples once, not per copy (each per-copy call cost atomic reference
-    count updates of every array it unpacked)."""
-    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
+def _period_draws_rows(lo, hi, fa, seed_a, period_a, graph_a, bad_a, noise_a):
+    """The draws of period ``period_a[b]`` of copies ``lo .. hi-1``, in place (as
+    :func:`~dobs_envs.sim.fault_state.period_draws`): period 0 the graph ``initial_graph`` and burst states
+    from the stationary distribution, a later period one step of the graph chain from ``graph_a[b]`` and of
+    each link's burst chain from ``bad_a[b]``; the measurement noise (``noise_a`` untouched without it). The
+    arrays are taken out of their tuples by the caller, once for the range (per copy, each unpacked array
+    cost an atomic reference count update on entry and exit)."""
     cum_transition, last_state = fa.cum_transition, fa.last_state
     noise_mask = fa.noise_mask
-    switching, burst = fa.switching, fa.burst
-    p_bad_good, p_good_bad, noise_std = fa.p_bad_good, fa.p_good_bad, fa.noise_std
+    switching, burst, initial_graph = fa.switching, fa.burst, fa.initial_graph
+    p_bad_good, p_good_bad, stationary_bad, noise_std = fa.p_bad_good, fa.p_good_bad, fa.stationary_bad, fa.noise_std
     E = fa.sender.shape[0]
     N, P = noise_mask.shape
     G = cum_transition.shape[1]
     for b in range(lo, hi):
         seed = seed_a[b]
-        kn = period_a[b] + 1
-        period_a[b] = kn
-        ku = np.uint64(kn)
-        if switching:
+        k = period_a[b]
+        first = k == 0
+        ku = np.uint64(k)
+        if not switching:
+            graph_a[b] = 0
+        elif first:
+            graph_a[b] = initial_graph
+        else:
             g = graph_a[b]
             thr = frng.uniform_at(frng.period_key(seed, _SWITCHING, ku), _U0) * cum_transition[g, G - 1]
             nxt = 0
@@ -318,13 +324,13 @@ def _draws_rows(lo, hi, fa, fs):
                     nxt += 1
             last = last_state[g]
             graph_a[b] = nxt if nxt < last else last
-        else:
-            graph_a[b] = 0
         if burst:
             key = frng.period_key(seed, _OO_BURST, ku)
             for e in range(E):
                 uu = frng.uniform_at(key, np.uint64(e))
-                if bad_a[b, e]:
+                if first:
+                    bad_a[b, e] = uu < stationary_bad
+                elif bad_a[b, e]:
                     bad_a[b, e] = uu >= p_bad_good  # stays bad unless it recovers
                 else:
                     bad_a[b, e] = uu < p_good_bad
@@ -337,6 +343,37 @@ def _draws_rows(lo, hi, fa, fs):
                 for q in range(P):
                     zq = frng.normal_at(key, np.uint64(i * P + q))
                     noise_a[b, i, q] = noise_std * zq * noise_mask[i, q]
+
+
+@_njit
+def _draws_rows(lo, hi, fa, fs):
+    """The period counters of copies ``lo .. hi-1`` ``+ 1`` and the draws of their new period
+    (:func:`_period_draws_rows`)."""
+    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
+    for b in range(lo, hi):
+        period_a[b] = period_a[b] + 1
+    _period_draws_rows(lo, hi, fa, seed_a, period_a, graph_a, bad_a, noise_a)
+
+
+@_njit
+def _period_draws(FF, FI, seed, period, graph, bad, noise):
+    _period_draws_rows(0, seed.shape[0], unpack_fault_args(FF, FI), seed, period, graph, bad, noise)
+
+
+def period_draws_compiled(fa: FaultArgs, seed, period, graph_prev, bad_prev, *, packed=None):
+    """Compiled counterpart of :func:`~dobs_envs.sim.fault_state.period_draws` (same arguments and returns,
+    bitwise the same draws: :mod:`.fault_rng`), e.g. as ``init_fault_state(..., draws=...)`` at the resets of
+    an environment. ``packed``: ``fa`` already packed (:func:`dobs_envs.packing.pack`), to skip packing."""
+    FF, FI = pack(fa) if packed is None else packed
+    seed = np.ascontiguousarray(seed, dtype=np.uint64).reshape(-1)
+    B = seed.shape[0]
+    E = fa.sender.shape[0]
+    period = np.ascontiguousarray(np.broadcast_to(np.asarray(period, dtype=np.int64), (B,)))
+    graph = np.array(np.broadcast_to(np.asarray(graph_prev, dtype=np.int64), (B,)), order="C")
+    bad = np.array(np.broadcast_to(np.asarray(bad_prev, dtype=np.bool_), (B, E)), order="C")
+    noise = np.zeros((B,) + fa.noise_mask.shape)
+    _period_draws(FF, FI, seed, period, graph, bad, noise)
+    return graph, bad, noise
 
 
 @_njit

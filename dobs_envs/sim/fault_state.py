@@ -233,7 +233,7 @@ def faulted_estimates(x, z, params, fs: FaultState | None = None) -> np.ndarray:
     return z + np.einsum("inp,bip->bin", params.G_bar, faulted_outputs(x, params, noise))
 
 
-def init_fault_state(params, fa: FaultArgs, x, z, seeds, co_nodes=None) -> FaultState:
+def init_fault_state(params, fa: FaultArgs, x, z, seeds, co_nodes=None, *, draws=None) -> FaultState:
     """The fault state of ``B`` copies at reset (period 0).
 
     Parameters
@@ -244,6 +244,9 @@ def init_fault_state(params, fa: FaultArgs, x, z, seeds, co_nodes=None) -> Fault
     seeds : (B,) non-negative integers below ``2**64`` (or one for every copy): each copy's fault seed.
     co_nodes : (K,) int, optional
         The observer node whose estimate each C-O link carries (default: every node, ``K = N``).
+    draws : callable, optional
+        :func:`period_draws` (the default) or a function with its arguments and bitwise its results
+        (:func:`dobs_envs.sim.fault_kernel.period_draws_compiled`: the environments' resets).
 
     The period-0 draws are made (:func:`period_draws`), then every link holds the sender's ``t = 0``
     estimate (with the period's noise), every snapshot slot holds it, and so do the C-O buffers.
@@ -260,7 +263,8 @@ def init_fault_state(params, fa: FaultArgs, x, z, seeds, co_nodes=None) -> Fault
         raise ValueError(f"co_nodes must be a 1-D array of observer node indices in [0, {N}), got {co_nodes!r}")
     E = fa.sender.shape[0]
     period = np.zeros(B, dtype=np.int64)
-    graph, bad, noise = period_draws(fa, seed, period, np.zeros(B, dtype=np.int64), np.zeros((B, E), dtype=bool))
+    graph, bad, noise = (period_draws if draws is None else draws)(fa, seed, period, np.zeros(B, dtype=np.int64),
+                                                                  np.zeros((B, E), dtype=bool))
     xhat0 = z + np.einsum("inp,bip->bin", params.G_bar, faulted_outputs(x, params, noise if fa.noise_std > 0 else None))
     K, Lc = co_nodes.shape[0], fa.co_delay + 1
     return FaultState(
