@@ -356,7 +356,7 @@ class EnvCore:
         self.__dict__.update(state)
         self._pool = None
         self._views()
-        for a in self._ka + (self._FP if self.faults is not None else ()):
+        for a in self._ka + (self._SF, self._SI) + (self._FP if self.faults is not None else ()):
             a.flags.writeable = False  # read-only as built: the compiled step is specialised on it (no recompilation)
 
     # ------------------------------------------------------------------ properties
@@ -553,10 +553,12 @@ class EnvCore:
     def kernel_arguments(self) -> dict:
         """Copies of the arguments of the step kernel except ``u`` (keywords of
         :func:`~dobs_envs.envs.step_kernel.advance_batch`: ``state, W, obs, outs, sig, ka, SF, SI,
-        consts``), e.g. to run a kernel and its numpy reference from the core's current state."""
+        consts``), e.g. to run a kernel and its numpy reference from the core's current state. The
+        constants (``ka``, ``SF``, ``SI``, ``fp``, ``fconsts``) are the core's own read-only arrays, not copies:
+        the kernels are specialised on read-only constants, and a writable copy would compile them again."""
         cp = lambda arrs: tuple(a.copy() for a in arrs)  # noqa: E731
         out = {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
-               "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF.copy(), "SI": self._SI.copy(),
+               "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF, "SI": self._SI,
                "consts": self._consts}
         if self.faults is not None:  # the arguments of advance_batch_faulted / advance_reference_faulted
             out.update(fp=self._FP, fs=cp(self._fs), rx=cp(self._rx), fconsts=self._fconsts)

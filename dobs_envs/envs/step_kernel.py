@@ -217,5 +217,6 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
     bad = first_non_finite(u)
     if bad >= 0:
         return bad
-    advance_range(0, u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts)
+    # np.int64(0), not 0: a literal would compile a second advance_range besides the threads' (int64, int64)
+    advance_range(np.int64(0), u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts)
     return -1

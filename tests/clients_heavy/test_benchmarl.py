@@ -45,9 +45,13 @@ def _experiment(algorithm, task, tmp_path) -> Experiment:
                       critic_model_config=MlpConfig.get_from_yaml(), seed=0, config=cfg)
 
 
-@pytest.mark.parametrize("algorithm", [MappoConfig, IppoConfig], ids=["mappo", "ippo"])
-def test_benchmarl_one_iteration_shared_group(algorithm, tmp_path):
-    task = _example().DobsEnvsTask.TRACKING.get_task({"max_cycles": 10})
+@pytest.mark.parametrize("algorithm,task_name", [(MappoConfig, "TRACKING"), (IppoConfig, "TRACKING"),
+                                                (MappoConfig, "TRACKING_LOSSY")],
+                         ids=["mappo", "ippo", "mappo-tracking_lossy"])
+def test_benchmarl_one_iteration_shared_group(algorithm, task_name, tmp_path):
+    """One iteration on the task (TRACKING_LOSSY: communication faults, each controller observing the
+    held C-O estimate, held O-O copies and the received mask)."""
+    task = getattr(_example().DobsEnvsTask, task_name).get_task({"max_cycles": 10})
     experiment = _experiment(algorithm, task, tmp_path)
     assert list(experiment.group_map) == ["controller"] and len(experiment.group_map["controller"]) == 5
     before = [p.detach().clone() for p in experiment.policy.parameters()]
