@@ -204,5 +204,7 @@ def advance_batch_faulted(state, W, obs, outs, u, sig, ka, SF, SI, consts, fp, f
     bad = first_non_finite(u)
     if bad >= 0:
         return bad
-    advance_range_faulted(0, u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts, fp, fs, rx, fconsts)
+    # np.int64(0), not 0: a literal would compile a second advance_range_faulted besides the threads' one
+    advance_range_faulted(np.int64(0), u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts, fp, fs, rx,
+                          fconsts)
     return -1
