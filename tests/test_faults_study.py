@@ -21,7 +21,7 @@ from dobs_envs.studies.faults import faults_study, initial_draws, markdown_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SMALL = dict(t_end=1.0, window=0.25, exchange_periods=(0.001, 0.01), losses=(0.0, 0.3), loss_exchange_period=None,
-             delays=(0, 2), switching_rates=(0.0,), long_factor=None, plot=False)
+             delays=(0, 2), switching_rates=(0.0,), long_factors=(), plot=False)
 FIGURES = ("tracking_rms_last", "tracking_rms_previous", "estimation_rms_last", "estimation_rms_previous",
            "max_gamma", "max_gamma_s", "gamma_growth_last_quarter", "gamma_s_growth_last_quarter")
 
@@ -88,14 +88,17 @@ def test_disconnected_switching_stays_finite_and_reports_gain_growth():
         assert c["gamma_growth_last_quarter"]["min"] > 3 * ideal["gamma_growth_last_quarter"]["max"]
 
 
-def test_unsettled_settings_are_rerun_longer():
-    res = faults_study(None, seeds=2, **dict(SMALL, exchange_periods=(), losses=(), delays=(2,), long_factor=2.0))
-    assert res["long_t_end"] == 2.0
+def test_unsettled_settings_are_rerun_longer_until_they_settle():
+    res = faults_study(None, seeds=2, **dict(SMALL, exchange_periods=(), losses=(), delays=(2,),
+                                             long_factors=(2.0, 3.0)))
+    assert res["long_t_ends"] == [2.0, 3.0]
     for c in res["settings"]:
+        runs = c["long_runs"]
         if c["settled"]:
-            assert c["long"] is None
-        else:
-            assert c["long"]["t_end"] == 2.0 and set(FIGURES) <= set(c["long"])
+            assert runs == []
+        else:  # rerun at 2 s; at 3 s only if not settled at 2 s and a copy is finite
+            assert [r["t_end"] for r in runs] in ([2.0], [2.0, 3.0]) and all(set(FIGURES) <= set(r) for r in runs)
+            assert (len(runs) == 2) == (not runs[0]["settled"] and runs[0]["n_diverged"] < 2)
     assert any(not c["settled"] for c in res["settings"])  # 1 s is still NE2's transient
 
 
@@ -105,11 +108,11 @@ def test_outputs_and_documented_keys(tmp_path):
     assert json.loads((tmp_path / "faults.json").read_text()) == res
     for f in ("faults.png", "faults_trajectories.png"):
         assert (tmp_path / f).stat().st_size > 1000
-    assert {"scenario", "dt", "control_period_s", "control_period_steps", "t_end", "window_s", "long_t_end",
+    assert {"scenario", "dt", "control_period_s", "control_period_steps", "t_end", "window_s", "long_t_ends",
             "seeds", "init_noise", "metrics", "settled_criterion", "sweeps", "settings"} <= set(res)
     assert res["control_period_s"] == pytest.approx(0.05) and res["seeds"] == [0, 1]
     for c in res["settings"]:
-        assert {"sweep", "value", "faults", "n_diverged", "n_settled", "settled", "settled_mean", "long"} \
+        assert {"sweep", "value", "faults", "n_diverged", "n_settled", "settled", "settled_mean", "long_runs"} \
             | set(FIGURES) <= set(c)
         for k in FIGURES:
             assert set(c[k]) == {"mean", "std", "min", "max", "per_seed"} and len(c[k]["per_seed"]) == 2
@@ -144,7 +147,8 @@ def test_initial_draws_are_tracking_v0_resets():
     (dict(switching_rates=(-1.0,)), "switching_rates must be >= 0"),
     (dict(losses=(1.5,)), "faults: oo_loss must be"),
     (dict(exchange_periods=(0.0015,)), "oo_period must be a positive integer multiple"),
-    (dict(long_factor=1.0), "long_factor must be > 1"),
+    (dict(long_factors=(1.0,)), "long_factors must be increasing factors > 1"),
+    (dict(long_factors=(3.0, 2.0)), "long_factors must be increasing factors > 1"),
 ])
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):

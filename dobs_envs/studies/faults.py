@@ -67,8 +67,9 @@ below ``SETTLE_ATOL`` (1e-3, under the O(dt) band of the ideal run at ``dt = 1 m
 never decides at the study's defaults); a setting has settled (``settled``) when every finite copy
 has. ``settled_mean`` applies the same test to the means over the finite copies: under random
 switching a single copy's 5 s windows differ by which graphs they happened to hold, while their
-mean over seeds may be stationary. A setting that has not settled (``settled`` false) is run again
-with ``long_factor`` (2) times the horizon, the same seeds, and both results are kept (``long``). Diverged: a copy whose figures are not finite (the compiled loop runs with numpy's
+mean over seeds may be stationary. A setting that has not settled (``settled`` false) is run again,
+with the same seeds, at ``long_factors`` (2, 4, 8) times the horizon in turn, until it settles, all its
+copies diverge or the factors run out; every rerun is kept (``long_runs``). Diverged: a copy whose figures are not finite (the compiled loop runs with numpy's
 error model, so an overflow gives inf/NaN, not an exception); it is counted in ``n_diverged`` and
 left out of the aggregates, and ``None`` stands for its figures in the JSON.
 
@@ -91,7 +92,7 @@ from ..sim.faults import MAX_DELAY, Faults
 from ._common import run_cells, write_results
 
 __all__ = ["EXCHANGE_PERIODS", "LOSSES", "DELAYS", "SWITCHING_RATES", "LOSS_EXCHANGE_PERIOD", "T_END", "WINDOW",
-           "SETTLE_RTOL", "SETTLE_ATOL", "LONG_FACTOR", "SWEEPS", "TRAJECTORIES", "faults_study", "settings",
+           "SETTLE_RTOL", "SETTLE_ATOL", "LONG_FACTORS", "SWEEPS", "TRAJECTORIES", "faults_study", "settings",
            "switching_graphs", "markdown_table", "summary"]
 
 #: O-O exchange periods of the sweep (s): the Euler step .. 0.1 s
@@ -110,8 +111,8 @@ WINDOW = 5.0
 #: settled criterion (module doc): relative change between the last two windows, absolute floor
 SETTLE_RTOL = 0.1
 SETTLE_ATOL = 1e-3
-#: horizon factor of the rerun of a setting that has not settled
-LONG_FACTOR = 2.0
+#: horizon factors of the successive reruns of a setting that has not settled (module doc)
+LONG_FACTORS = (2.0, 4.0, 8.0)
 #: spacing of the recorded samples (s)
 SAMPLE = 1e-3
 
@@ -295,7 +296,7 @@ def _aggregate(copies: list[dict], rtol: float, atol: float, t_end: float) -> di
 def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, window: float = WINDOW,
                  init_noise: float | None = None, exchange_periods=EXCHANGE_PERIODS, losses=LOSSES,
                  loss_exchange_period: float | None = LOSS_EXCHANGE_PERIOD, delays=DELAYS,
-                 switching_rates=SWITCHING_RATES, graphs=None, long_factor: float | None = LONG_FACTOR,
+                 switching_rates=SWITCHING_RATES, graphs=None, long_factors=LONG_FACTORS,
                  workers: int = 1, plot: bool = True) -> dict:
     """The paper's controller on NE2 under each fault (module doc); optionally writes ``faults.json``,
     ``faults.png`` and ``faults_trajectories.png`` to ``out``.
@@ -315,8 +316,9 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
         second loss sweep. Delays in control periods of 50 ms.
     graphs : list of (6, 6) adjacency matrices, optional
         The graphs of the switching chain (default :func:`switching_graphs`; the chain starts on the first).
-    long_factor : float or None
-        Horizon factor of the rerun of a setting that has not settled (``None``: no reruns).
+    long_factors : sequence of float
+        Increasing horizon factors (> 1) of the successive reruns of a setting that has not settled
+        (empty: no reruns).
     workers : int
         Processes running the settings.
     plot : bool
@@ -329,7 +331,8 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
         keys) and the figures of :func:`_aggregate` (``tracking_rms_last`` .. ``gamma_s_growth_last_quarter``,
         each ``{"mean", "std", "min", "max", "per_seed"}``; ``n_diverged``, ``n_settled``, ``settled``,
         ``settled_mean``),
-        with ``long`` the same at ``long_factor * t_end`` (``None`` when settled or not rerun).
+        with ``long_runs`` the same for each rerun, at ``long_factors[k] * t_end`` in turn (each with its
+        ``t_end``; empty when settled at ``t_end``).
     """
     seeds = _seeds(seeds)
     for name, v in (("t_end", t_end), ("window", window)):
@@ -337,8 +340,9 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
             raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
     if 2 * window > t_end:
         raise ValueError(f"t_end must hold two error windows (2 window = {2 * window:g} s), got t_end={t_end!r}")
-    if long_factor is not None and not (math.isfinite(long_factor) and long_factor > 1):
-        raise ValueError(f"long_factor must be > 1 or None, got {long_factor!r}")
+    factors = [float(f) for f in long_factors]
+    if any(not (math.isfinite(f) and f > 1) for f in factors) or factors != sorted(set(factors)):
+        raise ValueError(f"long_factors must be increasing factors > 1 (empty: no reruns), got {list(long_factors)!r}")
     if init_noise is not None and not (math.isfinite(init_noise) and init_noise >= 0):
         raise ValueError(f"init_noise must be >= 0 or None, got {init_noise!r}")
     sc = ne2(t_end=t_end)
@@ -356,14 +360,16 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
     runs = run_cells(_run_setting, [(c["faults"], tuple(seeds), init_noise, t_end, window, tr)
                                     for c, tr in zip(cells, traced)], workers)
     results = [dict(c, **_aggregate(r["copies"], SETTLE_RTOL, SETTLE_ATOL, t_end)) for c, r in zip(cells, runs)]
-    long_t = None if long_factor is None else float(long_factor * t_end)
-    redo = [i for i, r in enumerate(results) if not r["settled"]] if long_t is not None else []
-    reruns = run_cells(_run_setting, [(cells[i]["faults"], tuple(seeds), init_noise, long_t, window, False)
-                                      for i in redo], workers)
     for r in results:
-        r["long"] = None
-    for i, r in zip(redo, reruns):
-        results[i]["long"] = _aggregate(r["copies"], SETTLE_RTOL, SETTLE_ATOL, long_t)
+        r["long_runs"] = []
+    long_ts = [float(f * t_end) for f in factors]
+    for long_t in long_ts:  # rerun, longer each time, what has not settled and has a finite copy left
+        last = [(r["long_runs"] or [r])[-1] for r in results]
+        redo = [i for i, a in enumerate(last) if not a["settled"] and a["n_diverged"] < len(seeds)]
+        reruns = run_cells(_run_setting, [(cells[i]["faults"], tuple(seeds), init_noise, long_t, window, False)
+                                          for i in redo], workers)
+        for i, r in zip(redo, reruns):
+            results[i]["long_runs"].append(_aggregate(r["copies"], SETTLE_RTOL, SETTLE_ATOL, long_t))
     res = {
         "scenario": "ne2",
         "controller": "paper (u^k = K^k xhat_k + r^k at every Euler step, dobs_envs.rollout.rollout)",
@@ -372,7 +378,7 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
         "control_period_steps": S,
         "t_end": float(t_end),
         "window_s": float(window),
-        "long_t_end": long_t,
+        "long_t_ends": long_ts,
         "sample_spacing_s": SAMPLE,
         "seeds": seeds,
         "init_noise": init_noise,
@@ -390,7 +396,8 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
                               "text": "a copy has settled when, for both errors, |last - previous| <= rtol * "
                                       "max(last, previous) or both <= atol; a setting (settled) when all its "
                                       "finite copies have, settled_mean: the same test on the means over the "
-                                      "finite copies; settings not settled are rerun at long_t_end"},
+                                      "finite copies; settings not settled are rerun at each of long_t_ends "
+                                      "in turn until they settle or all their copies diverge"},
         "sweeps": {k: {"label": v[0], "unit": v[1]} for k, v in SWEEPS.items()},
         "settings": results,
     }
@@ -417,11 +424,10 @@ def _value_text(s: dict) -> str:
 def markdown_table(res: dict) -> str:
     """The degradation table (Markdown): per setting the RMS errors over the last window (mean ± std
     [min, max] over seeds), the settled flags (settled copies / finite copies; the means), for a setting rerun the
-    errors at the longer horizon, and the largest adaptive gains over the seeds."""
+    errors of its last (longest) rerun, and the largest adaptive gains over the seeds."""
     w, n = f"{res['window_s']:g} s", len(res["seeds"])
-    rerun = f"at {res['long_t_end']:g} s" if res["long_t_end"] is not None else "rerun"
     lines = [f"| fault | value | tracking RMS, last {w} | estimation RMS, last {w} | settled by {res['t_end']:g} s "
-             f"| {rerun}: tracking / estimation RMS (settled) | max gamma_i / gamma_is |", "|" + "---|" * 7]
+             f"| last rerun: tracking / estimation RMS (settled) | max gamma_i / gamma_is |", "|" + "---|" * 7]
 
     def flag(a):
         if a["n_diverged"] == n:
@@ -430,9 +436,10 @@ def markdown_table(res: dict) -> str:
         return txt + (f", {a['n_diverged']} diverged" if a["n_diverged"] else "")
 
     for s in res["settings"]:
-        lg = s["long"]
-        long_txt = ("-" if lg is None else "all diverged" if lg["n_diverged"] == n else
-                    f"{_fmt(lg['tracking_rms_last'])} / {_fmt(lg['estimation_rms_last'])} ({flag(lg)})")
+        lg = s["long_runs"][-1] if s["long_runs"] else None
+        long_txt = ("-" if lg is None else f"all diverged by {lg['t_end']:g} s" if lg["n_diverged"] == n else
+                    f"at {lg['t_end']:g} s: {_fmt(lg['tracking_rms_last'])} / {_fmt(lg['estimation_rms_last'])} "
+                    f"({flag(lg)})")
         g, gs = s["max_gamma"]["max"], s["max_gamma_s"]["max"]
         gains = "diverged" if g is None else f"{g:.3g} / {gs:.3g}"
         lines.append(f"| {s['sweep']} | {_value_text(s)} | {_fmt(s['tracking_rms_last'])} | "
@@ -448,11 +455,11 @@ def summary(res: dict) -> str:
         tr, es = c["tracking_rms_last"], c["estimation_rms_last"]
         fig = ("diverged" if tr["mean"] is None else
                f"tracking {tr['mean']:.3g} ± {tr['std']:.2g}  estimation {es['mean']:.3g} ± {es['std']:.2g}")
-        lg = c["long"]
-        late = "" if lg is None else f"  at {lg['t_end']:g} s: all diverged" if lg["tracking_rms_last"]["mean"] is None \
-            else (f"  at {lg['t_end']:g} s: {lg['tracking_rms_last']['mean']:.3g} / "
-                  f"{lg['estimation_rms_last']['mean']:.3g}{'' if lg['settled'] else ' (not settled)'}"
-                  f"{', ' + str(lg['n_diverged']) + ' diverged' if lg['n_diverged'] else ''}")
+        late = "".join(f"  at {lg['t_end']:g} s: all diverged" if lg["tracking_rms_last"]["mean"] is None
+                       else (f"  at {lg['t_end']:g} s: {lg['tracking_rms_last']['mean']:.3g} / "
+                             f"{lg['estimation_rms_last']['mean']:.3g}{'' if lg['settled'] else ' (not settled)'}"
+                             f"{', ' + str(lg['n_diverged']) + ' diverged' if lg['n_diverged'] else ''}")
+                       for lg in c["long_runs"])
         div = f", {c['n_diverged']} diverged" if c["n_diverged"] else ""
         flag = "settled" if c["settled"] else (f"NOT settled ({c['n_settled']} copies"
                                                f"{', mean settled' if c['settled_mean'] else ''})")
@@ -485,7 +492,7 @@ def _plot(res: dict, path: str) -> None:
                     ax.plot(xi, m, "o", mfc="w", mec="C3", ms=9, label="not settled (some copy)")
                 if s["n_diverged"]:
                     ax.axvline(xi, color="C3", ls=":", lw=1, label="copies diverged")
-                lg = s["long"]
+                lg = s["long_runs"][-1] if s["long_runs"] else None
                 if lg is not None and lg[metric]["mean"] is not None:
                     ax.plot(xi, lg[metric]["mean"], "x", color="0.3", ms=7, label=f"mean at {lg['t_end']:g} s")
                 elif lg is not None:
