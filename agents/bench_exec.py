@@ -253,7 +253,12 @@ class RayBackend(Backend):
     def __exit__(self, exc_type, exc, tb) -> bool:
         import ray
 
-        if self._pending and ray.is_initialized():  # an exception or Ctrl-C: end the queued and running tasks
+        # An exception or Ctrl-C: end the queued and running tasks. A local Ray this backend started ends
+        # them by shutting down (its processes end), so only a cluster or a caller's session, which stay up,
+        # need ray.cancel. That keeps Ray 2.60's race of a cancel with a task's reply (a fatal check, "Tried
+        # to complete task that was not pending", ray-project/ray#54527) off a local Ray's Ctrl-C.
+        local_owned = self._owned and self.address is None
+        if self._pending and not local_owned and ray.is_initialized():
             for r in self._pending:
                 ray.cancel(r, force=True)
         self._pending = []
