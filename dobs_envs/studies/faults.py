@@ -364,7 +364,7 @@ def faults_study(out: str | None = None, *, seeds=10, t_end: float = T_END, wind
         r["long_runs"] = []
     long_ts = [float(f * t_end) for f in factors]
     for long_t in long_ts:  # rerun, longer each time, what has not settled and has a finite copy left
-        last = [(r["long_runs"] or [r])[-1] for r in results]
+        last = [_last_rerun(r) or r for r in results]
         redo = [i for i, a in enumerate(last) if not a["settled"] and a["n_diverged"] < len(seeds)]
         reruns = run_cells(_run_setting, [(cells[i]["faults"], tuple(seeds), init_noise, long_t, window, False)
                                           for i in redo], workers)
@@ -421,6 +421,11 @@ def _value_text(s: dict) -> str:
     return f"{s['value']:g}" + (f" {unit}" if unit else "")
 
 
+def _last_rerun(setting: dict) -> dict | None:
+    """The longest rerun of ``setting`` (the last of ``long_runs``), or None if it was not rerun."""
+    return setting["long_runs"][-1] if setting["long_runs"] else None
+
+
 def markdown_table(res: dict) -> str:
     """The degradation table (Markdown): per setting the RMS errors over the last window (mean ± std
     [min, max] over seeds), the settled flags (settled copies / finite copies; the means), for a setting rerun the
@@ -436,7 +441,7 @@ def markdown_table(res: dict) -> str:
         return txt + (f", {a['n_diverged']} diverged" if a["n_diverged"] else "")
 
     for s in res["settings"]:
-        lg = s["long_runs"][-1] if s["long_runs"] else None
+        lg = _last_rerun(s)
         long_txt = ("-" if lg is None else f"all diverged by {lg['t_end']:g} s" if lg["n_diverged"] == n else
                     f"at {lg['t_end']:g} s: {_fmt(lg['tracking_rms_last'])} / {_fmt(lg['estimation_rms_last'])} "
                     f"({flag(lg)})")
@@ -492,7 +497,7 @@ def _plot(res: dict, path: str) -> None:
                     ax.plot(xi, m, "o", mfc="w", mec="C3", ms=9, label="not settled (some copy)")
                 if s["n_diverged"]:
                     ax.axvline(xi, color="C3", ls=":", lw=1, label="copies diverged")
-                lg = s["long_runs"][-1] if s["long_runs"] else None
+                lg = _last_rerun(s)
                 if lg is not None and lg[metric]["mean"] is not None:
                     ax.plot(xi, lg[metric]["mean"], "x", color="0.3", ms=7, label=f"mean at {lg['t_end']:g} s")
                 elif lg is not None:
