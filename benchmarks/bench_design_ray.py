@@ -37,10 +37,10 @@ Usage::
     budget's steps, (b) the mean seconds per env step of the same (env, agent)'s records at another
     step count, times the budget's steps, (c) the same from a proxy agent of the same env
     (``ppo_sqrt`` <- ``ppo``, ``ppo_res_ma`` <- ``ppo_ma``: same algorithm and network layout), (d) for the
-    off-policy agents (SAC, TD3, CrossQ at 600k steps, none ever run at that budget): the env's PPO
+    off-policy agents (SAC, TD3, CrossQ at 600k steps) without a full-budget record: the env's PPO
     seconds per step times PPO's / the agent's env-steps per second measured side by side in
-    ``results/offpolicy_throughput_tracking.json`` (tracking, SBX one copy = the shipped recipe, idle
-    machine). (b)-(d) assume training time proportional to env steps. Evaluation and the analytic
+    ``results/offpolicy_throughput_tracking.json`` (tracking, SBX with the shipped recipe's copies and
+    gradient steps, :func:`throughput_row`). (b)-(d) assume training time proportional to env steps. Evaluation and the analytic
     baselines are not in ``train_seconds`` and not projected.
 
 BLAS threads are pinned to one before numpy is imported (see ``bench_design.py``: on this loaded
@@ -70,9 +70,18 @@ import projection as proj  # noqa: E402
 CORES = (2, 32, 128)
 OFF_POLICY = ("sac", "td3", "crossq")
 PROXY = {"ppo_sqrt": "ppo", "ppo_res_ma": "ppo_ma"}
-#: offpolicy_throughput_tracking.json rows of the shipped recipes (SBX, one env copy, one gradient step)
-THROUGHPUT_ROWS = {"ppo": "ppo SB3 (recipe)", "sac": "sac SBX 1 env", "td3": "td3 SBX 1 env",
-                   "crossq": "crossq SBX 1 env"}
+
+
+def throughput_row(agent: str) -> str:
+    """The row of ``offpolicy_throughput_tracking.json`` measured with ``agent``'s shipped tracking recipe:
+    PPO's, or SBX with the recipe's environment copies and gradient steps per collect."""
+    if agent == "ppo":
+        return "ppo SB3 (recipe)"
+    from agents.recipes import resolve_recipe
+
+    r = resolve_recipe(agent, "tracking")
+    g = r.algo_kwargs.get("gradient_steps", 1)
+    return f"{agent} SBX 1 env" if r.n_envs == 1 else f"{agent} SBX {r.n_envs} env G={g}"
 
 
 def _load() -> list[float]:
@@ -309,7 +318,8 @@ def run_benchmark_projection(results_dir: str) -> dict:
     recs = _records(results_dir)
     with open(os.path.join(results_dir, "offpolicy_throughput_tracking.json")) as fh:
         thr = json.load(fh)["throughput"]
-    sps = {a: float(thr[row]["steps_per_s"]) for a, row in THROUGHPUT_ROWS.items()}
+    rows = {a: throughput_row(a) for a in ("ppo", *OFF_POLICY)}
+    sps = {a: float(thr[row]["steps_per_s"]) for a, row in rows.items()}
     runs, sources = [], {}
     for sp in plan.specs:
         env, agent, seed, steps = sp["env"], sp["agent"], sp["seed"], sp["steps"]
@@ -320,7 +330,7 @@ def run_benchmark_projection(results_dir: str) -> dict:
             ps, src = _per_step(recs, env, "ppo")
             t = ps * steps * sps["ppo"] / sps[agent]
             how = (f"PPO's s/step on {env} ({src}) x PPO/{agent} throughput ratio "
-                   f"{sps['ppo'] / sps[agent]:.1f} (tracking, SBX 1 copy, offpolicy_throughput_tracking.json)")
+                   f"{sps['ppo'] / sps[agent]:.1f} (tracking, {rows[agent]!r}, offpolicy_throughput_tracking.json)")
         else:
             ps, src = _per_step(recs, env, agent)
             how = f"scaled by env steps from {src}"
