@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickletools
 import re
 import zipfile
 from dataclasses import dataclass
@@ -180,6 +181,18 @@ class ResumePoint:
     sb3_timesteps: int
 
 
+def _complete_pickle(path: str) -> bool:
+    """Whether ``path`` holds a whole pickle (its opcodes parsed up to STOP, nothing executed): a kill
+    during SB3's in-place save leaves an empty or truncated normaliser."""
+    try:
+        with open(path, "rb") as fh:
+            for _ in pickletools.genops(fh):
+                pass
+        return True
+    except (OSError, ValueError, EOFError):
+        return False
+
+
 def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
     """Where :func:`agents.train.resume` continues the run in ``path``: the later of ``model.zip`` (saved
     on an interrupt; ``config.json`` ``model_sb3_timesteps``) and the last complete checkpoint (a valid
@@ -207,7 +220,7 @@ def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
             points.append(ResumePoint(os.path.join(ck, f), vn, None, n))
     # a kill can cut a checkpoint short: SB3 writes the model, then the normaliser, in place
     complete = [p for p in points if zipfile.is_zipfile(p.model)
-                and (p.vecnormalize is None or os.path.isfile(p.vecnormalize))]
+                and (p.vecnormalize is None or _complete_pickle(p.vecnormalize))]
     if not complete:
         raise RunDirError(f"{path!r} has nothing to resume from (no model.zip of an interrupted run, no complete "
                           f"checkpoints/{cfg['algo']}_<steps>_steps.zip" + (" with its normaliser)" if norm else ")"))

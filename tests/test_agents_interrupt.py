@@ -320,3 +320,17 @@ def test_overwrite_removes_the_previous_runs_files(tmp_path, capsys):
     assert _checkpoints(out) == [] and not os.listdir(os.path.join(out, "checkpoints"))
     assert _config(out)["timesteps"] == 128 and _config(out)["status"] == "complete"
     capsys.readouterr()
+
+
+def test_a_truncated_normaliser_is_not_a_complete_checkpoint(tmp_path):
+    """A kill during SB3's in-place save of the normaliser leaves it empty or cut short: resume must not
+    pick that checkpoint (the pickle's opcodes are parsed, nothing is executed)."""
+    import pickle
+
+    from agents.runs import _complete_pickle
+
+    whole = pickle.dumps({"obs_rms": list(range(100))})
+    for name, data, ok in (("whole", whole, True), ("empty", b"", False), ("cut", whole[:-7], False)):
+        p = tmp_path / f"{name}.pkl"
+        p.write_bytes(data)
+        assert _complete_pickle(str(p)) is ok, name
