@@ -53,22 +53,31 @@ __all__ = ["train", "resume", "resume_point", "load_agent", "TrainedAgent", "Tra
            "ResumePoint", "RUNNING", "INTERRUPTED", "COMPLETE"]
 
 
-#: XLA's CPU flags for one thread (read when JAX creates its CPU client, i.e. at the first JAX computation)
-XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
+#: XLA's CPU flag for one thread, kept for jaxlib versions that honour it (read when JAX creates its CPU
+#: client, i.e. at the first JAX computation); jaxlib 0.10 ignores it (its Eigen pool kept 2 threads)
+XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false",)
+#: environment variable that sizes the thread pool of the PJRT CPU client, on which XLA runs its
+#: intra-op work (read when JAX creates that client); "1": one thread
+PJRT_THREADS = "PJRT_NPROC"
 
 
 def set_threads(threads: int | None = 1) -> None:
     """``torch.set_num_threads`` (1 by default: small MLPs on 2-core machines are ~10x
     faster single-threaded), and with ``threads=1`` XLA single-threaded too (SBX, the ``jax``
     extra): without it every training process of the benchmark runs a thread pool the size of the
-    machine, and two workers on two cores contend. The XLA flags are added to ``XLA_FLAGS``
-    (kept if the user set them) and take effect only if JAX has not computed anything yet in this
-    process; the benchmark's workers call this before building a model."""
+    machine, and two workers on two cores contend. XLA's pool is sized by ``PJRT_NPROC`` (set to 1
+    unless the user set it; jaxlib 0.10 ignores ``--xla_cpu_multi_thread_eigen=false``, which is
+    added to ``XLA_FLAGS`` too, keeping flags the user set). Both take effect only if JAX has not
+    computed anything yet in this process; the benchmark's workers call this before building a model.
+    Side by side on tracking (two SBX runs of 8 copies at once on 2 cores, 2026-12-03, both orders):
+    CrossQ +7 % and +12 % env-steps/s with one XLA thread, SAC -7 % and +23 % (noise of the shared
+    machine; ``benchmarks/offpolicy_throughput.py --xla-threads``)."""
     import torch
 
     if threads:
         torch.set_num_threads(int(threads))
     if threads == 1:
+        os.environ.setdefault(PJRT_THREADS, "1")
         flags = os.environ.get("XLA_FLAGS", "")
         missing = [f for f in XLA_ONE_THREAD if f.split("=")[0] not in flags]
         if missing:

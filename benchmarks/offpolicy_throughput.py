@@ -202,8 +202,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated substrings: candidates whose label holds one "
                                                  "(the PPO reference is always kept)")
     ap.add_argument("--xla-threads", type=int, default=None,
-                    help="1: XLA's CPU backend single-threaded (sets XLA_FLAGS before Jax is imported); default: "
-                         "XLA's own (all cores)")
+                    help="threads of XLA's CPU client (PJRT_NPROC, set before JAX computes); default: as "
+                         "agents.train.set_threads does (1 with --threads 1; else XLA's own: all cores)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (agents' default 1)")
     ap.add_argument("--curve", type=int, default=None, metavar="STEPS",
                     help="also train each candidate STEPS env steps and score it on tuning episodes")
@@ -213,9 +213,10 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=5, help="tuning episodes per checkpoint")
     ap.add_argument("--json", default=None, help="write the measurements to this (new) file")
     args = ap.parse_args(argv)
-    if args.xla_threads == 1:
-        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false "
-                                   "intra_op_parallelism_threads=1").strip()
+    if args.xla_threads is not None:
+        if args.xla_threads < 1:
+            ap.error(f"--xla-threads must be >= 1, got {args.xla_threads}")
+        os.environ["PJRT_NPROC"] = str(args.xla_threads)  # set_threads keeps it
     if args.json and os.path.exists(args.json):
         print(f"offpolicy_throughput: error: --json {args.json!r} exists", file=sys.stderr)
         return 2
@@ -249,12 +250,13 @@ def main(argv=None) -> int:
                     args.episodes)
     print()
     print(f"{args.env}: {args.steps} env steps per window, best of {args.repeats}; torch threads {args.threads}, "
-          f"XLA {'single-threaded' if args.xla_threads == 1 else 'default threads'}; {os.cpu_count()} CPUs, "
+          f"XLA threads {os.environ.get('PJRT_NPROC', 'default (all cores)')}; {os.cpu_count()} CPUs, "
           f"load average {os.getloadavg()[0]:.1f}; {time.perf_counter() - t0:.0f} s in all")
     print(markdown(tp, cv, ref))
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"args": vars(args), "throughput": tp, "curves": cv}, fh, indent=1)
+            json.dump({"args": vars(args), "xla_threads": os.environ.get("PJRT_NPROC"), "throughput": tp, "curves": cv},
+                      fh, indent=1)
     return 0
 
 

@@ -239,25 +239,33 @@ def test_noise_type_in_recipes():
 
 
 @pytest.mark.skipif(importlib.util.find_spec("jax") is None, reason="the jax extra is not installed")
-@pytest.mark.parametrize("user_flags", [None, "--xla_cpu_multi_thread_eigen=true"])
-def test_one_thread_also_for_xla(user_flags):
-    """set_threads(1) makes a training process single-threaded in XLA too (SBX), keeping flags the user
-    set; XLA aborts on flags it does not know, so the JAX computation afterwards checks the spelling."""
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts threads by their names in /proc")
+@pytest.mark.parametrize("user_flags, user_threads", [(None, None), ("--xla_cpu_multi_thread_eigen=true", "2")])
+def test_one_thread_also_for_xla(user_flags, user_threads):
+    """set_threads(1) makes a training process single-threaded in XLA too (SBX): after a JAX computation
+    the process has one XLA compute thread (jaxlib names them tf_XLAEigen; a user's PJRT_NPROC=2 gives
+    two, which shows the count is the pool's size), keeping flags and thread counts the user set; XLA
+    aborts on flags it does not know, so the JAX computation afterwards checks the spelling."""
     code = textwrap.dedent("""
         import os
         from agents.train import set_threads
         set_threads(1)
         set_threads(1)  # idempotent
         import jax.numpy as jnp
-        assert float(jnp.arange(4.0).sum()) == 6.0
-        print(os.environ["XLA_FLAGS"])
+        x = jnp.ones((256, 256))
+        assert float((x @ x).sum()) == 256.0 ** 3
+        names = [open(f"/proc/self/task/{t}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+        print(sum("XLAEigen" in n for n in names), os.environ["PJRT_NPROC"], os.environ["XLA_FLAGS"])
     """)
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "PJRT_NPROC")}
     if user_flags:
         env["XLA_FLAGS"] = user_flags
+    if user_threads:
+        env["PJRT_NPROC"] = user_threads
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    flags = out.stdout.split()
-    assert flags.count("intra_op_parallelism_threads=1") == 1
+    pool, nproc, *flags = out.stdout.split()
+    assert nproc == (user_threads or "1")
+    assert int(pool) == int(user_threads or 1)
     eigen = [f for f in flags if f.startswith("--xla_cpu_multi_thread_eigen")]
     assert eigen == [user_flags or "--xla_cpu_multi_thread_eigen=false"]
