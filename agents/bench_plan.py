@@ -231,7 +231,7 @@ def stored_answer(spec: dict) -> tuple[str, dict | None]:
 
 # ---------------------------------------------------------------------- the runs of an invocation
 def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None,
-          recipes: dict | None = None) -> tuple[dict, int]:
+          recipes: dict | None = None, agent_seeds: dict | None = None) -> tuple[dict, int, dict]:
     B = BUDGETS[budget]
     default = max(B["agents"].values())
     plan = dict(B["agents"])
@@ -252,7 +252,16 @@ def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: i
     n_seeds = int(seeds if seeds is not None else B["seeds"])
     if n_seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
-    return plan, n_seeds
+    counts = {}
+    for key, n in (agent_seeds or {}).items():
+        if key not in plan:
+            raise ValueError(f"agent_seeds names {key!r}, which this benchmark does not train; its agents: "
+                             f"{sorted(plan)}")
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ValueError(f"agent_seeds[{key!r}] must be an integer >= 1, got {n!r}")
+        if n != n_seeds:
+            counts[key] = n
+    return plan, n_seeds, counts
 
 
 @dataclass(frozen=True)
@@ -261,7 +270,9 @@ class BenchmarkPlan:
 
     ``specs`` holds one training run per (env, agent, training seed), longest first; a run's
     ``path`` is ``<out>/models/<env>/<budget>/<agent>/s<seed>``. ``recipes``: the recipe-file agents,
-    ``{"<agent>@recipe": {"agent", "file", "sha256"}}`` (:func:`plan_runs`).
+    ``{"<agent>@recipe": {"agent", "file", "sha256"}}`` (:func:`plan_runs`). ``training_seeds``: every
+    agent's training seeds but those of ``agent_seeds`` (``{agent: its seeds}``, agents trained with
+    another number of runs); :meth:`seeds_of` gives an agent's.
     """
 
     envs: list
@@ -273,18 +284,28 @@ class BenchmarkPlan:
     env_kwargs: dict
     specs: list
     recipes: dict = field(default_factory=dict)
+    agent_seeds: dict = field(default_factory=dict)
+
+    def seeds_of(self, agent: str) -> list:
+        """The training seeds of ``agent`` (a key of ``steps``)."""
+        return self.agent_seeds.get(agent, self.training_seeds)
 
 
 def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
               eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
               agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1,
-              recipes: dict | None = None) -> BenchmarkPlan:
+              recipes: dict | None = None, agent_seeds: dict | None = None) -> BenchmarkPlan:
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
     written). With :func:`pending_runs` it tells which of them a stored result already answers.
 
     ``env``: a registered name (:data:`agents.config.ENVS`) or ``"all"``: the fault-free tasks
     (:data:`agents.config.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
     them again under faults and is run by its name).
+
+    ``seeds``: the number of training runs of every agent (``seed, seed + 1, ...``; default the
+    budget's); ``agent_seeds``: ``{agent: number}`` for agents that train another number (e.g. 5 runs of
+    an expensive agent beside 10 of the others: its table row then says 5 runs); each must be an agent
+    of this benchmark (``<agent>@recipe`` included).
 
     ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
     Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
@@ -306,12 +327,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     bad = sorted(set(recipes) - set(AGENTS))
     if bad:
         raise ValueError(f"recipe files for unknown agents {bad}; choose from {sorted(AGENTS)}")
-    plan, n_seeds = _plan(budget, agents, timesteps, seeds, recipes)
+    plan, n_seeds, counts = _plan(budget, agents, timesteps, seeds, recipes, agent_seeds)
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     # the three seed ranges (agents/seeds.py): training seeds, evaluation episodes, tuning episodes
-    check_training_seeds(seed, n_seeds, name="seed")
+    check_training_seeds(seed, max([n_seeds, *counts.values()]), name="seed")
     eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
     curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
@@ -331,7 +352,7 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
             if key in provenance:  # not in the signature: the stored run's hyperparameters tell the recipe
                 extra = {"recipe": sections[(provenance[key]["agent"], e)],
                          "recipe_file": {k: provenance[key][k] for k in ("file", "sha256")}}
-            for s in range(seed, seed + n_seeds):
+            for s in range(seed, seed + counts.get(key, n_seeds)):
                 specs.append({"env": e, "agent": key, "seed": s, "steps": int(steps), "hp": hp,
                               "env_kwargs": env_kwargs, "eval_seeds": eval_seeds, "curve_seeds": curve_seeds,
                               "curve_every": max(1, int(steps) // B["curve_points"]), "threads": threads,
@@ -339,7 +360,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     # longest jobs first: better packing on the workers
     specs.sort(key=lambda sp: -sp["steps"] * (5 if agent_spec(sp["agent"]).multi_agent else 1))
     return BenchmarkPlan(env_names, budget, plan, list(range(seed, seed + n_seeds)), eval_seeds, curve_seeds,
-                         env_kwargs, specs, provenance)
+                         env_kwargs, specs, provenance,
+                         {k: list(range(seed, seed + n)) for k, n in counts.items()})
 
 
 def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:

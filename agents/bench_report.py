@@ -401,6 +401,7 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
                          f"communication faults ({sorted(FAULT_FREE)}): "
                          + ("missing" if fault_free is None else "given for an env without faults"))
     budget, training_seeds = plan.budget, plan.training_seeds
+    agent_seeds = {k: v for k, v in plan.agent_seeds.items() if k in plan.steps}
     edir = os.path.join(out, env)
     os.makedirs(edir, exist_ok=True)
     paper = analytic[PAPER]
@@ -409,7 +410,7 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
     payloads, rows, curves, detail, train_s = {}, [], {}, {}, {}
     for key in plan.steps:
         a = agent_spec(key)
-        runs = [results[(env, key, s)] for s in training_seeds]
+        runs = [results[(env, key, s)] for s in plan.seeds_of(key)]
         payloads[a.label] = runs
         rows.append(_aggregate(a.label, a.kind, runs, paper_cost, information=a.information, steps=plan.steps[key],
                                fault_free_cost=ff_cost))
@@ -445,7 +446,8 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
     if fault_free is not None:
         metrics_doc["degradation"] = DEGRADATION_DOC
     doc = {
-        "env": env, "budget": budget, "training_seeds": list(training_seeds), "eval_seeds": plan.eval_seeds,
+        "env": env, "budget": budget, "training_seeds": list(training_seeds),
+        **({"agent_training_seeds": agent_seeds} if agent_seeds else {}), "eval_seeds": plan.eval_seeds,
         "curve_seeds": plan.curve_seeds, "episodes": len(plan.eval_seeds), "env_kwargs": plan.env_kwargs,
         "train_steps": plan.steps, "train_seconds": train_s, "paper_cost": paper_cost.tolist(),
         "recipe_files": _recipe_files(plan),
@@ -480,6 +482,7 @@ def write_summary(out: str, plan: BenchmarkPlan, per_env_rows: dict, docs: dict,
                   f"{plan.budget} budget: cost relative to the paper's controller")
     faulted = {e: FAULT_FREE[e] for e in plan.envs if e in FAULT_FREE}
     summary = {"budget": plan.budget, "envs": plan.envs, "training_seeds": list(plan.training_seeds),
+               **({"agent_training_seeds": plan.agent_seeds} if plan.agent_seeds else {}),
                "eval_seeds": plan.eval_seeds, "recipe_files": _recipe_files(plan), **extra,
                "statistics": STATISTICS_DOC,
                **({"fault_free": faulted, "degradation": DEGRADATION_DOC} if faulted else {}),

@@ -103,10 +103,12 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                   eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
                   agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
                   progress: bool = True, threads: int | None = 1, overwrite: bool = False,
-                  backend: str = "process", address: str | None = None, recipes: dict | None = None) -> dict:
+                  backend: str = "process", address: str | None = None, recipes: dict | None = None,
+                  agent_seeds: dict | None = None) -> dict:
     """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
 
-    Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's).
+    Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's; ``agent_seeds``
+    ``{agent: number}`` gives some agents another number, :func:`plan_runs`).
     ``backend`` (:data:`BACKENDS`, :mod:`agents.bench_exec`): ``"process"`` (default): ``workers``
     processes train in parallel (default: the number of CPU cores, at most 8); ``"serial"``: one
     after another in this process; ``"ray"``: Ray tasks of ``threads`` CPUs each, on a local Ray
@@ -126,7 +128,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     """
     t_start = time.perf_counter()
     P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
-                  agents=agents, seeds=seeds, threads=threads, recipes=recipes)
+                  agents=agents, seeds=seeds, threads=threads, recipes=recipes, agent_seeds=agent_seeds)
     be = make_backend(backend, workers=workers, address=address)  # checks the arguments before any write
     claim_out_dir(out, overwrite=overwrite)  # refuses a directory holding files the benchmark did not write
     clash = replaced_runs(pending_runs(P))

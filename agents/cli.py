@@ -77,6 +77,9 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="runs/benchmark")
     p.add_argument("--seed", type=_seed, default=0, help="first training seed (seeds seed, seed+1, ...)")
     p.add_argument("--seeds", type=_positive_int, default=None, help="number of training seeds (default: the budget's)")
+    p.add_argument("--agent-seeds", action="append", default=None, metavar="AGENT=N",
+                   help="train AGENT with N training seeds instead (seed .. seed+N-1; its table row says N runs), "
+                        "e.g. crossq=5 beside the budget's 10 for the others; repeatable (one per agent)")
     p.add_argument("--backend", choices=BACKENDS, default="process",
                    help="where runs train: process (default: --workers processes on this machine), serial (one after "
                         "another in this process) or ray (Ray tasks; needs the distributed extra)")
@@ -388,6 +391,15 @@ def _benchmark(args) -> int:
         if not os.path.isfile(path):
             _usage_error(f"--recipe {item!r}: recipe file {path!r} does not exist")
         recipes[name] = path
+    agent_seeds = {}
+    for item in args.agent_seeds or []:
+        name, sep, n = item.partition("=")
+        name = name.strip()
+        if not sep or not name or not n.strip().isdigit() or int(n) < 1:
+            _usage_error(f"--agent-seeds {item!r}: expected AGENT=N with N >= 1, e.g. crossq=5")
+        if name in agent_seeds:
+            _usage_error(f"--agent-seeds: two numbers for agent {name!r}; give one per agent")
+        agent_seeds[name] = int(n)
     agents = None
     if args.agents is not None:
         agents = [a.strip() for a in args.agents.split(",")]
@@ -398,6 +410,11 @@ def _benchmark(args) -> int:
         if unknown:
             _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}"
                          + (f" or {sorted(variants)}" if variants else " (AGENT@recipe needs --recipe AGENT=FILE)"))
+    trained = agents if agents is not None else [*BUDGETS[args.budget]["agents"], *(k + RECIPE_SUFFIX for k in recipes)]
+    for name in agent_seeds:
+        if name not in trained:
+            _usage_error(f"--agent-seeds names {name!r}, which this benchmark does not train; its agents: "
+                         f"{','.join(trained)}")
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         _usage_error(f"--out {args.out!r} is a file, not a directory")
     if args.address is not None and args.backend != "ray":
@@ -422,7 +439,7 @@ def _benchmark(args) -> int:
     try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                          episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
-                         recipes=recipes)
+                         recipes=recipes, agent_seeds=agent_seeds)
     except HyperparamsError as exc:  # a recipe file without the env's section, or unreadable
         _usage_error(f"--recipe: {exc}")
     except ValueError as exc:
@@ -433,7 +450,8 @@ def _benchmark(args) -> int:
         summ = run_benchmark(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
                              workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite,
-                             backend=args.backend, address=args.address, recipes=recipes)
+                             backend=args.backend, address=args.address, recipes=recipes,
+                             agent_seeds=agent_seeds)
     except OutDirError as exc:  # the directory changed since the check above
         _usage_error(f"--out {exc}")
     except ConnectionError as exc:  # --address: no Ray cluster there
@@ -447,7 +465,8 @@ def _benchmark(args) -> int:
         raise SystemExit(130) from None
     for env, table in summ["tables"].items():
         print()
-        print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}, evaluation episodes "
+        other = "".join(f", {k}: {v}" for k, v in summ.get("agent_training_seeds", {}).items())
+        print(f"{env}, budget {args.budget}: training seeds {summ['training_seeds']}{other}, evaluation episodes "
               f"{summ['eval_seeds'][0]}..{summ['eval_seeds'][-1]} (the same for every policy)")
         print(table)
         if env in summ.get("fault_free", {}):

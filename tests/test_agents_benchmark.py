@@ -221,7 +221,10 @@ def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_
 
 
 @pytest.mark.parametrize("argv", [["--seeds", "0"], ["--workers", "-1"], ["--env", "nope"], ["--episodes", "x"],
-                                  ["--agents", "ppo,dqn"], ["--agents", "ppo,dqn", "--dry-run"]])
+                                  ["--agents", "ppo,dqn"], ["--agents", "ppo,dqn", "--dry-run"],
+                                  ["--agent-seeds", "ppo=0"], ["--agent-seeds", "ppo"], ["--agent-seeds", "dqn=2"],
+                                  ["--agent-seeds", "sac=2", "--dry-run"],
+                                  ["--agent-seeds", "ppo=2", "--agent-seeds", "ppo=3"]])
 def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as exc:
@@ -251,6 +254,36 @@ def test_cli_dry_run_lists_the_runs_that_would_train(tiny_run, tmp_path, capsys)
     assert main(["benchmark", "--env", "all", "--budget", "tiny", "--out", str(empty), "--dry-run"]) == 0
     assert capsys.readouterr().out.startswith(f"{4 * n} of {4 * n} runs would train; 0 kept models")
     assert not empty.exists()
+
+
+def test_an_agent_with_its_own_number_of_training_runs(tiny_run, tmp_path, capsys):
+    """--agent-seeds AGENT=N: that agent trains seeds seed .. seed+N-1 while the others keep the budget's
+    count; its row is computed over its N runs and says so (here N=1 from the stored seed 0: nothing trains)."""
+    import shutil
+
+    out, _, full = tiny_run
+    mine = str(tmp_path / "out")
+    shutil.copytree(os.path.join(out, "models"), os.path.join(mine, "models"))
+    n = len(TINY["agents"]) * TINY["seeds"]
+    # more runs than stored: only the new seed trains
+    assert main(["benchmark", "--budget", "tiny", "--out", mine, "--dry-run", "--agent-seeds", "ppo=3"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"1 of {n + 1} runs would train")
+    assert lines[1] == f"  train tracking ppo seed 2: {TINY['agents']['ppo']} steps -> {mine}/models/tracking/tiny/ppo/s2"
+    assert main(["benchmark", "--budget", "tiny", "--out", mine, "--no-progress", "--workers", "1",
+                 "--agent-seeds", "ppo=1"]) == 0
+    printed = capsys.readouterr().out
+    assert f"training seeds {list(range(TINY['seeds']))}, ppo: [0]," in printed
+    doc = json.load(open(os.path.join(mine, "tracking", "results.json")))
+    assert doc["agent_training_seeds"] == {"ppo": [0]}
+    assert all(v == 0.0 for secs in doc["train_seconds"].values() for v in secs)  # every run was stored
+    rows = {r["policy"]: r for r in doc["results"]}
+    before = {r["policy"]: r for r in full["results"]}
+    ppo, shared = AGENTS["ppo"].label, AGENTS["ppo_ma"].label
+    assert rows[ppo]["runs"] == 1 and list(doc["episodes_detail"][ppo]) == ["s0"]
+    assert rows[ppo]["run_scores"] == before[ppo]["run_scores"][:1]
+    assert rows[shared]["runs"] == TINY["seeds"] and rows[shared]["run_scores"] == before[shared]["run_scores"]
+    assert json.load(open(os.path.join(mine, "summary.json")))["agent_training_seeds"] == {"ppo": [0]}
 
 
 def test_cli_train_and_evaluate_residual(tmp_path, capsys):
