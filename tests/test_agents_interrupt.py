@@ -185,6 +185,21 @@ class _AtStart:
         return _Cb()
 
 
+def _loads(model_zip: str, normaliser: str) -> bool:
+    """Whether a checkpoint is whole: its zip reads back and its normaliser unpickles (the test's own files)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(model_zip) as z:
+            if z.testzip() is not None:
+                return False
+        with open(normaliser, "rb") as fh:
+            pickle.load(fh)
+        return True
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError, pickle.UnpicklingError):
+        return False
+
+
 def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     """SIGKILL (no chance to save): config.json says running, resume takes the latest complete checkpoint."""
     from stable_baselines3 import PPO
@@ -200,8 +215,9 @@ def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
     ck = os.path.join(out, "checkpoints")
     zip_of, norm_of = (lambda n: os.path.join(ck, f"ppo_{n}_steps.zip")), \
         (lambda n: os.path.join(ck, f"ppo_vecnormalize_{n}_steps.pkl"))
-    # the kill may have cut the last checkpoint short (SB3 writes the model, then the normaliser)
-    last = max(int(f.split("_")[1]) for f in _checkpoints(out) if os.path.exists(norm_of(f.split("_")[1])))
+    # the kill may have cut the last checkpoint short (SB3 writes the model, then the normaliser, in
+    # place): the latest checkpoint is the latest whose zip and normaliser both load
+    last = max(n for n in (int(f.split("_")[1]) for f in _checkpoints(out)) if _loads(zip_of(n), norm_of(n)))
     # later but incomplete checkpoints, as a kill leaves them, are not taken: a truncated zip,
     # an empty one (both with a normaliser), a whole zip without its normaliser
     with open(zip_of(last), "rb") as fh:
