@@ -37,11 +37,17 @@ Usage::
     budget's steps, (b) the mean seconds per env step of the same (env, agent)'s records at another
     step count, times the budget's steps, (c) the same from a proxy agent of the same env
     (``ppo_sqrt`` <- ``ppo``, ``ppo_res_ma`` <- ``ppo_ma``: same algorithm and network layout), (d) for the
-    off-policy agents (SAC, TD3, CrossQ at 600k steps) without a full-budget record: the env's PPO
-    seconds per step times PPO's / the agent's env-steps per second measured side by side in
-    ``results/offpolicy_throughput_tracking.json`` (tracking, SBX with the shipped recipe's copies and
-    gradient steps, :func:`throughput_row`). (b)-(d) assume training time proportional to env steps. Evaluation and the analytic
-    baselines are not in ``train_seconds`` and not projected.
+    off-policy agents (SAC, TD3, CrossQ at 600k steps) without a full-budget record on that env: the
+    env's PPO seconds per step times the agent's / PPO's seconds per step on tracking, from their
+    full-budget tracking records (the shipped recipes, trained by the same benchmark command, 2 workers
+    on 2 cores); without tracking records, PPO's / the agent's env-steps per second measured side by
+    side in ``results/offpolicy_throughput_tracking.json`` (SBX with the shipped recipe's copies and
+    gradient steps, :func:`throughput_row`). (b)-(d) assume training time proportional to env steps,
+    and (d) that the off-policy / PPO cost ratio carries over from tracking to the other envs. As the
+    off-policy agents' cost is mostly their gradient updates, which do not depend on the env, a second
+    table (the other bracket, "update-bound") takes (d)'s runs at their agent's own seconds per step on
+    tracking.
+    Evaluation and the analytic baselines are not in ``train_seconds`` and not projected.
 
 BLAS threads are pinned to one before numpy is imported (see ``bench_design.py``: on this loaded
 2-core machine multi-threaded OpenBLAS made the design ~30x slower); Ray workers inherit the
@@ -318,9 +324,24 @@ def run_benchmark_projection(results_dir: str) -> dict:
     recs = _records(results_dir)
     with open(os.path.join(results_dir, "offpolicy_throughput_tracking.json")) as fh:
         thr = json.load(fh)["throughput"]
-    rows = {a: throughput_row(a) for a in ("ppo", *OFF_POLICY)}
-    sps = {a: float(thr[row]["steps_per_s"]) for a, row in rows.items()}
+    ratios = {}  # agent -> (its seconds per env step / PPO's, where that comes from)
+    ppo_tracking, ppo_src = _per_step(recs, "tracking", "ppo")
+    for agent in OFF_POLICY:
+        if recs.get(("tracking", "full", agent)):
+            ps, src = _per_step(recs, "tracking", agent)
+            ratios[agent] = (ps / ppo_tracking, f"tracking full-budget records ({src}; {ppo_src})")
+            continue
+        rows = {a: throughput_row(a) for a in ("ppo", agent)}
+        missing = [row for row in rows.values() if row not in thr]
+        if missing:
+            raise SystemExit(f"{agent} has no full-budget tracking record in {results_dir} and "
+                             f"offpolicy_throughput_tracking.json has no row {missing[0]!r} (its shipped recipe): "
+                             f"measure it with benchmarks/offpolicy_throughput.py or train its tracking runs")
+        sps = {a: float(thr[row]["steps_per_s"]) for a, row in rows.items()}
+        ratios[agent] = (sps["ppo"] / sps[agent], f"side-by-side throughput on tracking ({rows[agent]!r}, "
+                                                  f"offpolicy_throughput_tracking.json)")
     runs, sources = [], {}
+    upper = {}  # run index -> the update-bound estimate of an off-policy run (its tracking s/step x steps)
     for sp in plan.specs:
         env, agent, seed, steps = sp["env"], sp["agent"], sp["seed"], sp["steps"]
         full = {s: (st, ts) for s, st, ts, _ in recs.get((env, "full", agent), [])}
@@ -328,9 +349,10 @@ def run_benchmark_projection(results_dir: str) -> dict:
             t, how = full[seed][1], "measured (full-budget record)"
         elif agent in OFF_POLICY:
             ps, src = _per_step(recs, env, "ppo")
-            t = ps * steps * sps["ppo"] / sps[agent]
-            how = (f"PPO's s/step on {env} ({src}) x PPO/{agent} throughput ratio "
-                   f"{sps['ppo'] / sps[agent]:.1f} (tracking, {rows[agent]!r}, offpolicy_throughput_tracking.json)")
+            t = ps * steps * ratios[agent][0]
+            how = f"PPO's s/step on {env} ({src}) x {agent}/PPO cost ratio {ratios[agent][0]:.1f} ({ratios[agent][1]})"
+            if recs.get(("tracking", "full", agent)):  # the other bracket: the updates cost the same on every env
+                upper[len(runs)] = _per_step(recs, "tracking", agent)[0] * steps
         else:
             ps, src = _per_step(recs, env, agent)
             how = f"scaled by env steps from {src}"
@@ -349,7 +371,12 @@ def run_benchmark_projection(results_dir: str) -> dict:
         print(f"    {env:22s} {agent:11s} {statistics.fmean(ts):8.0f} s  {how}")
     dur = [r["train_seconds"] for r in runs]
     groups = {"all runs": dur,
+              "all runs, off-policy estimates update-bound": [upper.get(i, t) for i, t in enumerate(dur)],
               "without the off-policy estimates": [r["train_seconds"] for r in runs if r["agent"] not in OFF_POLICY]}
+    if upper:
+        print(f"  update-bound bracket: {len(upper)} off-policy runs estimated instead at their agent's own s/step on "
+              f"tracking (the gradient updates, not the env, set their cost): mean "
+              f"{statistics.fmean(upper.values()):.0f} s against {statistics.fmean(dur[i] for i in upper):.0f} s")
     table = {}
     for label, d in groups.items():
         table[label] = {}
@@ -373,12 +400,15 @@ def run_benchmark_projection(results_dir: str) -> dict:
                             "ratio_to_ppo_recorded": rec_ps / ppo_ps}
     thr_sb3 = {"sac": float(thr["sac SB3 1 env (recipe)"]["steps_per_s"]),
                "td3": float(thr["td3 SB3 1 env (recipe)"]["steps_per_s"])}
+    ppo_sps = float(thr[throughput_row("ppo")]["steps_per_s"])
     for agent, c in check.items():
-        c["ratio_to_ppo_throughput_file_sb3"] = sps["ppo"] / thr_sb3[agent]
+        c["ratio_to_ppo_throughput_file_sb3"] = ppo_sps / thr_sb3[agent]
         print(f"  cross-check {agent}: hetero_mas records ({c['records']} runs at {c['steps']} steps, SB3, 2 workers on "
               f"2 cores) {c['ratio_to_ppo_recorded']:.0f}x PPO's s/step there; the throughput file's SB3 ratio on "
               f"tracking {c['ratio_to_ppo_throughput_file_sb3']:.0f}x")
-    return {"runs": runs, "table": table, "throughput_steps_per_s": sps, "offpolicy_crosscheck": check,
+    for i, t in upper.items():
+        runs[i]["train_seconds_update_bound"] = t
+    return {"runs": runs, "table": table, "offpolicy_cost_ratio_to_ppo": ratios, "offpolicy_crosscheck": check,
             "budget": {k: BUDGETS["full"][k] for k in ("agents", "seeds")},
             "records": {"/".join(k): len(v) for k, v in sorted(recs.items())}}
 
@@ -390,7 +420,9 @@ def main(argv=None) -> int:
     ap.add_argument("--states", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-one-cpu", action="store_true", help="skip the 1-CPU Ray run (the out-of-sample check)")
-    ap.add_argument("--results", default="/work/main/results", help="directory of the stored run archives")
+    ap.add_argument("--results", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                                      "results"),
+                    help="directory of the stored run archives (default: the repository's results/)")
     ap.add_argument("--json", help="write every figure here (refuses an existing file)")
     args = ap.parse_args(argv)
     if args.json and os.path.exists(args.json):
