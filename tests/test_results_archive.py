@@ -24,17 +24,15 @@ ARCHIVES = {
     "quick_all_runs.tar.gz": ("all", "quick", 48,
                               {e: f"#### {e} (quick budget)" for e in
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
-    # the budget's six PPO-family agents, SAC and TD3 at PPO's step count (README, full budget on
-    # tracking: CrossQ follows, issue 21)
     # issue 23: the faulted environment, the quick budget's agents
     "tracking_lossy_quick_runs.tar.gz": ("tracking_lossy", "quick", 12,
                                          {"tracking_lossy": "#### tracking_lossy (quick budget)"}, None),
     # issue 22: today's PPO recipe and dobs-envs tune's best recipe (RECIPES), 10 runs each
     "hetero_mas_tuned_runs.tar.gz": ("hetero_mas", "full", 20,
                                      {"hetero_mas": "#### The tuned PPO recipe on hetero_mas (full budget)"}, ["ppo"]),
-    "tracking_full_runs.tar.gz": ("tracking", "full", 80,
-                                  {"tracking": "### RL versus the paper's controller (full budget, tracking)"},
-                                  ["ppo", "ppo_ma", "ppo_sqrt", "ppo_res", "ppo_res_ma", "ppo_bc", "sac", "td3"]),
+    # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
+    "tracking_full_runs.tar.gz": ("tracking", "full", 90,
+                                  {"tracking": "### RL versus the paper's controller (full budget, tracking)"}, None),
 }
 
 #: ``--recipe AGENT=FILE`` of an archive's command (paths relative to the repository)
