@@ -325,10 +325,12 @@ def run_benchmark_projection(results_dir: str) -> dict:
     with open(os.path.join(results_dir, "offpolicy_throughput_tracking.json")) as fh:
         thr = json.load(fh)["throughput"]
     ratios = {}  # agent -> (its seconds per env step / PPO's, where that comes from)
+    own = {}  # agent -> its own seconds per env step on tracking (the update-bound bracket)
     ppo_tracking, ppo_src = _per_step(recs, "tracking", "ppo")
     for agent in OFF_POLICY:
         if recs.get(("tracking", "full", agent)):
             ps, src = _per_step(recs, "tracking", agent)
+            own[agent] = ps
             ratios[agent] = (ps / ppo_tracking, f"tracking full-budget records ({src}; {ppo_src})")
             continue
         rows = {a: throughput_row(a) for a in ("ppo", agent)}
@@ -351,8 +353,8 @@ def run_benchmark_projection(results_dir: str) -> dict:
             ps, src = _per_step(recs, env, "ppo")
             t = ps * steps * ratios[agent][0]
             how = f"PPO's s/step on {env} ({src}) x {agent}/PPO cost ratio {ratios[agent][0]:.1f} ({ratios[agent][1]})"
-            if recs.get(("tracking", "full", agent)):  # the other bracket: the updates cost the same on every env
-                upper[len(runs)] = _per_step(recs, "tracking", agent)[0] * steps
+            if agent in own:  # the other bracket: the updates cost the same on every env
+                upper[len(runs)] = own[agent] * steps
         else:
             ps, src = _per_step(recs, env, agent)
             how = f"scaled by env steps from {src}"
