@@ -37,7 +37,8 @@ only keys rl-zoo3 understands:
   (:func:`agents.algos.make_action_noise`; ``pink`` too outside the sections rl-zoo3 reads)
 - ``lin_<x>`` schedules for ``learning_rate`` / ``clip_range``; the algorithm's constructor arguments
 
-Sections read by ``agents/`` only: ``default-ma``, ``<env>-ma`` (parameter sharing),
+Sections read by ``agents/`` only: ``<env>`` (settings rl-zoo3 cannot read, such as
+``noise_type: pink``, for every recipe of the env), ``default-ma``, ``<env>-ma`` (parameter sharing),
 ``default-<variant>``, ``<env>-<variant>``, ``<env>-ma-<variant>`` (hybrids, ``variant`` in
 :data:`VARIANTS`), ``<env>`` being the short name (``tracking``). They may also hold
 
@@ -46,9 +47,10 @@ Sections read by ``agents/`` only: ``default-ma``, ``<env>-ma`` (parameter shari
 - ``bc`` (``bc``): ``{episodes, noise, epochs, lr}`` of the warm start
 
 Lookup (each section replaces the keys it sets, as YAML's merge key does): ``default``,
-``default-ma`` (multi-agent), the Gymnasium id's section, ``<env>-ma`` (multi-agent), then
-``default-<variant>``, ``<env>-<variant>``, ``<env>-ma-<variant>`` (multi-agent). A
-centralised, pure-RL recipe is therefore exactly the section rl-zoo3 reads.
+``default-ma`` (multi-agent), the Gymnasium id's section, ``<env>``, ``<env>-ma`` (multi-agent),
+then ``default-<variant>``, ``<env>-<variant>``, ``<env>-ma-<variant>`` (multi-agent). A
+centralised, pure-RL recipe is therefore the section rl-zoo3 reads, updated by the env's ``<env>``
+section where the file has one (rl-zoo3 trains without those settings).
 
 Nothing named in a file is imported or evaluated here: ``policy_kwargs`` / ``normalize``
 strings are parsed as literals, ``dict(...)`` and the activation names of
@@ -338,7 +340,7 @@ def _rescale_wrapper(value, where: str) -> bool:
 
 
 def _is_agents_only(section: str) -> bool:
-    return section.endswith("-ma") or any(section.endswith(f"-{v}") for v in VARIANTS)
+    return section in ENVS or section.endswith("-ma") or any(section.endswith(f"-{v}") for v in VARIANTS)
 
 
 def read_hyperparams_file(path: str) -> dict[str, dict]:
@@ -393,7 +395,7 @@ def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, override
     algo = algo.lower()
     table = read_hyperparams_file(_hyperparams_path(algo))
     name = env_key(env) if isinstance(env, str) else "default"
-    keys = ["default"] + (["default-ma"] if multi_agent else []) + [gym_id(name)]
+    keys = ["default"] + (["default-ma"] if multi_agent else []) + [gym_id(name)] + ([name] if name in ENVS else [])
     keys += [f"{name}-ma"] if multi_agent else []
     if variant:
         keys += [f"default-{variant}", f"{name}-{variant}"] + ([f"{name}-ma-{variant}"] if multi_agent else [])

@@ -168,3 +168,15 @@ def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
         given = {float(v) for v in re.findall(r"(?:--eval-env-kwargs|--env-kwargs)\s+\W*\s*state_bound:([0-9.e+]+)", text)}
         assert given == {task}, given
     assert "--eval-env-kwargs state_bound" in readme and "--env-kwargs state_bound" in readme
+
+
+def test_env_section_is_agents_only_and_applied_after_the_gym_id_section(tmp_path):
+    """``<env>`` (short name) holds what rl-zoo3 cannot read; it need not be complete, and the lookup
+    applies it on top of the Gymnasium id's section (td3.yaml's ``hetero_mas``: pink noise)."""
+    path = _write(tmp_path, BASE + '"dobs_envs/HeteroMAS-v0":\n  <<: *default\n  noise_type: normal\n'
+                                   "hetero_mas:\n  noise_type: pink\n")
+    assert read_hyperparams_file(path)["hetero_mas"] == {"noise_type": "pink"}
+    table = read_hyperparams_file(os.path.join(HYPERPARAMS_DIR, "td3.yaml"))
+    assert table["dobs_envs/HeteroMAS-v0"]["noise_type"] == "normal"  # what rl-zoo3 trains with
+    assert load_hyperparams("td3", "hetero_mas")["noise_type"] == "pink"
+    assert load_hyperparams("td3", "tracking")["noise_type"] == "normal"
