@@ -34,8 +34,8 @@ Usage::
     ``dobs-envs benchmark --env all --budget full`` projected from stored run records: the run list is
     :func:`agents.bench_plan.plan_runs` (its order is the submission order); each run's training time
     is, in this order of preference, (a) its own full-budget record (``train_seconds``) at the
-    budget's steps, (b) the mean seconds per env step of the same (env, agent)'s records at another
-    step count, times the budget's steps, (c) the same from a proxy agent of the same env
+    budget's steps, (b) the mean seconds per env step of the same (env, agent)'s records (other
+    seeds, or another step count), times the budget's steps, (c) the same from a proxy agent of the same env
     (``ppo_sqrt`` <- ``ppo``, ``ppo_res_ma`` <- ``ppo_ma``: same algorithm and network layout), (d) for the
     off-policy agents (SAC, TD3, CrossQ at 600k steps) without a full-budget record on that env: the
     env's PPO seconds per step times the agent's / PPO's seconds per step on tracking, from their
@@ -349,6 +349,9 @@ def run_benchmark_projection(results_dir: str) -> dict:
         full = {s: (st, ts) for s, st, ts, _ in recs.get((env, "full", agent), [])}
         if seed in full and full[seed][0] == steps:
             t, how = full[seed][1], "measured (full-budget record)"
+        elif agent in OFF_POLICY and recs.get((env, "full", agent)):  # its own runs on env, other seeds
+            ps, src = _per_step(recs, env, agent)
+            t, how = ps * steps, f"scaled by env steps from {src}"
         elif agent in OFF_POLICY:
             ps, src = _per_step(recs, env, "ppo")
             t = ps * steps * ratios[agent][0]
@@ -390,24 +393,21 @@ def run_benchmark_projection(results_dir: str) -> dict:
             lb = proj.lower_bound(d, P)
             table[label][P] = {"submission": sub, "lpt": lpt, "lower_bound": lb}
             print(f"  {P:6d} {sub / 3600:17.2f} {lpt / 3600:8.2f} {lb / 3600:12.2f}")
-    # cross-check of the off-policy rule on the one env with stored (old-budget, SB3) off-policy records
+    # cross-check of the two brackets on every other env with full-budget off-policy records: the agent's
+    # cost ratio to PPO there (the first bracket's rule) and its own s/step there against tracking's (the second's)
     check = {}
-    for agent in ("sac", "td3"):
-        rs = recs.get(("hetero_mas", "full", agent), [])
-        if rs:
-            rec_ps = statistics.fmean(ts / st for _, st, ts, _ in rs)
-            ppo_ps, _ = _per_step(recs, "hetero_mas", "ppo")
-            check[agent] = {"records": len(rs), "steps": sorted({st for _, st, _, _ in rs}),
-                            "seconds_per_step_recorded_sb3": rec_ps,
-                            "ratio_to_ppo_recorded": rec_ps / ppo_ps}
-    thr_sb3 = {"sac": float(thr["sac SB3 1 env (recipe)"]["steps_per_s"]),
-               "td3": float(thr["td3 SB3 1 env (recipe)"]["steps_per_s"])}
-    ppo_sps = float(thr[throughput_row("ppo")]["steps_per_s"])
-    for agent, c in check.items():
-        c["ratio_to_ppo_throughput_file_sb3"] = ppo_sps / thr_sb3[agent]
-        print(f"  cross-check {agent}: hetero_mas records ({c['records']} runs at {c['steps']} steps, SB3, 2 workers on "
-              f"2 cores) {c['ratio_to_ppo_recorded']:.0f}x PPO's s/step there; the throughput file's SB3 ratio on "
-              f"tracking {c['ratio_to_ppo_throughput_file_sb3']:.0f}x")
+    for (env, budget, agent), rs in sorted(recs.items()):
+        if budget != "full" or agent not in own or env == "tracking" or not rs:
+            continue
+        rec_ps, _ = _per_step(recs, env, agent)
+        ppo_ps, _ = _per_step(recs, env, "ppo")
+        check[f"{env}/{agent}"] = {"records": len(rs), "steps": sorted({st for _, st, _, _ in rs}),
+                                   "seconds_per_step": rec_ps, "ratio_to_ppo": rec_ps / ppo_ps,
+                                   "ratio_to_ppo_tracking": ratios[agent][0],
+                                   "seconds_per_step_tracking": own[agent]}
+        print(f"  cross-check {env}/{agent} ({len(rs)} full-budget runs): {rec_ps / ppo_ps:.1f}x PPO's s/step there "
+              f"(on tracking {ratios[agent][0]:.1f}x); its s/step {rec_ps * 1e3:.2f} ms against "
+              f"{own[agent] * 1e3:.2f} ms on tracking")
     for i, t in upper.items():
         runs[i]["train_seconds_update_bound"] = t
     return {"runs": runs, "table": table, "offpolicy_cost_ratio_to_ppo": ratios, "offpolicy_crosscheck": check,

@@ -48,15 +48,11 @@ def _printed_tolerance(text: str) -> float:
     return 0.5 * 10.0 ** (-decimals + (int(exp) if exp else 0))
 
 
-def check_readme_table(heading: str, results_json: str, former: tuple = ()) -> None:
-    """Every row of the README's table under ``heading`` is what ``results_json`` gives, except the rows
-    labelled in ``former``: those were trained with a former budget that today's command no longer
-    reproduces (they must be in the table and not in the results)."""
+def check_readme_table(heading: str, results_json: str) -> None:
+    """Every row of the README's table under ``heading`` is what ``results_json`` gives."""
     header, rows = readme_rows(heading)
     doc = json.load(open(results_json))
     got = {r["policy"]: r for r in doc["results"]}
-    assert set(former) <= {r[0] for r in rows} and not set(former) & set(got), (heading, former)
-    rows = [r for r in rows if r[0] not in former]
     assert {r[0] for r in rows} == set(got), (heading, sorted(got))
     for row in rows:
         r = got[row[0]]

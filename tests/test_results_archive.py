@@ -12,15 +12,13 @@ from agents.benchmark import pending_runs, plan_runs
 from readme_tables import check_readme_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-#: the README rows trained with a former budget: SAC and TD3 at 50k env steps, before the full budget
-#: gave the off-policy agents PPO's 600k (issue 21); shown until they are trained again
-FORMER_ROWS = {"hetero_mas_full_runs.tar.gz": ("SAC (centralised)", "TD3 (centralised)")}
 ARCHIVES = {
     # archive -> (env argument, budget, runs, {env: README heading of its table}, --agents (None: the budget's))
-    # six of the budget's nine agents (FORMER_ROWS: SAC and TD3 at 50k; CrossQ is new)
-    "hetero_mas_full_runs.tar.gz": ("hetero_mas", "full", 60,
+    # the budget's nine agents: the six PPO-family ones (10 runs each), SAC, TD3 and CrossQ at PPO's step
+    # count (5 runs each, AGENT_SEEDS)
+    "hetero_mas_full_runs.tar.gz": ("hetero_mas", "full", 75,
                                     {"hetero_mas": "### RL versus the paper's controller (full budget, hetero_mas)"},
-                                    ["ppo", "ppo_ma", "ppo_sqrt", "ppo_res", "ppo_res_ma", "ppo_bc"]),
+                                    None),
     "quick_all_runs.tar.gz": ("all", "quick", 48,
                               {e: f"#### {e} (quick budget)" for e in
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
@@ -37,11 +35,15 @@ ARCHIVES = {
 
 #: ``--recipe AGENT=FILE`` of an archive's command (paths relative to the repository)
 RECIPES = {"hetero_mas_tuned_runs.tar.gz": {"ppo": "results/hetero_mas_ppo_tuned.yml"}}
+#: ``--agent-seeds AGENT=N`` of an archive's command
+AGENT_SEEDS = {"hetero_mas_full_runs.tar.gz": {"sac": 5, "td3": 5, "crossq": 5}}
 
 
-def _recipes(name: str) -> dict | None:
+def _options(name: str) -> dict:
+    """The archive's command options beyond env, budget and --agents, as plan_runs/run_benchmark take them."""
     r = RECIPES.get(name)
-    return None if r is None else {k: os.path.join(ROOT, v) for k, v in r.items()}
+    return {"recipes": None if r is None else {k: os.path.join(ROOT, v) for k, v in r.items()},
+            "agent_seeds": AGENT_SEEDS.get(name)}
 
 
 @pytest.fixture(scope="module", params=sorted(ARCHIVES))
@@ -62,7 +64,7 @@ def test_every_stored_run_is_reused_with_todays_recipes(extracted):
     would then no longer be what the command gives (retrain, re-archive)."""
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]
-    plan = plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))
+    plan = plan_runs(env, budget, out, agents=agents, **_options(name))
     assert len(plan.specs) == runs
     assert [(sp["env"], sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
 
@@ -76,10 +78,10 @@ def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
 
     name, out = extracted
     env, budget, _, headings, agents = ARCHIVES[name]
-    assert pending_runs(plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))) == []  # or hours of training
-    run_benchmark(env, budget, out, workers=1, progress=False, agents=agents, recipes=_recipes(name))
+    assert pending_runs(plan_runs(env, budget, out, agents=agents, **_options(name))) == []  # or hours of training
+    run_benchmark(env, budget, out, workers=1, progress=False, agents=agents, **_options(name))
     for e, heading in headings.items():
-        check_readme_table(heading, os.path.join(out, e, "results.json"), FORMER_ROWS.get(name, ()))
+        check_readme_table(heading, os.path.join(out, e, "results.json"))
 
 
 def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
@@ -89,9 +91,9 @@ def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
 
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]
-    plan = plan_runs(env, budget, out, episodes=5, agents=agents, recipes=_recipes(name))
+    plan = plan_runs(env, budget, out, episodes=5, agents=agents, **_options(name))
     todo = pending_runs(plan)
     assert len(todo) == runs and len(replaced_runs(todo)) == runs and reevaluated_runs(plan) == []
     with pytest.raises(RunConflictError, match=f"{runs} finished run"):
-        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False, agents=agents, recipes=_recipes(name))
-    assert pending_runs(plan_runs(env, budget, out, agents=agents, recipes=_recipes(name))) == []  # nothing was touched
+        run_benchmark(env, budget, out, episodes=5, workers=1, progress=False, agents=agents, **_options(name))
+    assert pending_runs(plan_runs(env, budget, out, agents=agents, **_options(name))) == []  # nothing was touched
