@@ -349,10 +349,7 @@ def run_benchmark_projection(results_dir: str) -> dict:
         full = {s: (st, ts) for s, st, ts, _ in recs.get((env, "full", agent), [])}
         if seed in full and full[seed][0] == steps:
             t, how = full[seed][1], "measured (full-budget record)"
-        elif agent in OFF_POLICY and recs.get((env, "full", agent)):  # its own runs on env, other seeds
-            ps, src = _per_step(recs, env, agent)
-            t, how = ps * steps, f"scaled by env steps from {src}"
-        elif agent in OFF_POLICY:
+        elif agent in OFF_POLICY and not recs.get((env, "full", agent)):  # else: scaled from its own runs
             ps, src = _per_step(recs, env, "ppo")
             t = ps * steps * ratios[agent][0]
             how = f"PPO's s/step on {env} ({src}) x {agent}/PPO cost ratio {ratios[agent][0]:.1f} ({ratios[agent][1]})"
