@@ -168,25 +168,8 @@ class DObsEnv:
         return info
 
 
-def make(env_id: str, **options) -> tuple[DObsEnv, EnvParams]:
-    """``(env, default_params)`` of a registered id, as ``gymnax.make``.
-
-    Parameters
-    ----------
-    env_id : one of :func:`registered_envs` (``"dobs_envs/Tracking-v0"``, ...).
-    options : the environment's options (those of ``gym.make(env_id, ...)``: ``state_bound``,
-        ``normalized_actions``, ``padded_observations``, ``observation``, ``reward``, ``scenario``, ...),
-        plus
-        ``max_episode_steps`` : int, the truncation horizon in control steps (default: the scenario's
-        ``t_end`` over the control period; ``params.max_steps_in_episode``);
-        ``dtype`` : ``"float32"`` or ``"float64"`` (default: float64 when ``jax_enable_x64`` is on, else
-        float32); the simulation's float type. Observations keep the ``obs_dtype`` option;
-        ``sparse`` : bool, default True: the products run over the nonzeros of the system's matrices
-        (:mod:`dobs_envs.jax.operators`); False for parameters with other nonzeros (``vmap`` over systems).
-    """
-    if not isinstance(env_id, str) or env_id not in GYM_IDS:
-        raise ValueError(f"unknown environment id {env_id!r}; registered ids are {list(GYM_IDS)}")
-    entry = next(e for e in ENVIRONMENTS.values() if e.gym_id == env_id)
+def _build(entry, options: dict) -> tuple:
+    """``(structure, params, core)`` of a registry entry with the keyword ``options`` of :func:`make`."""
     reject_horizon_options(options)
     if options.get("render_mode") is not None:
         raise TypeError("render_mode is not an option of the JAX environments (they run compiled, without a display)")
@@ -207,4 +190,27 @@ def make(env_id: str, **options) -> tuple[DObsEnv, EnvParams]:
         if not math.isfinite(cost) or cost > np.finfo(np.float32).max:
             raise ValueError(f"state_bound={core.state_bound:g}: the termination penalty ({cost:.3g}) overflows "
                              f"float32; use dtype='float64' or a smaller state_bound")
+    return structure, params, core
+
+
+def make(env_id: str, **options) -> tuple[DObsEnv, EnvParams]:
+    """``(env, default_params)`` of a registered id, as ``gymnax.make``.
+
+    Parameters
+    ----------
+    env_id : one of :func:`registered_envs` (``"dobs_envs/Tracking-v0"``, ...).
+    options : the environment's options (those of ``gym.make(env_id, ...)``: ``state_bound``,
+        ``normalized_actions``, ``padded_observations``, ``observation``, ``reward``, ``scenario``, ...),
+        plus
+        ``max_episode_steps`` : int, the truncation horizon in control steps (default: the scenario's
+        ``t_end`` over the control period; ``params.max_steps_in_episode``);
+        ``dtype`` : ``"float32"`` or ``"float64"`` (default: float64 when ``jax_enable_x64`` is on, else
+        float32); the simulation's float type. Observations keep the ``obs_dtype`` option;
+        ``sparse`` : bool, default True: the products run over the nonzeros of the system's matrices
+        (:mod:`dobs_envs.jax.operators`); False for parameters with other nonzeros (``vmap`` over systems).
+    """
+    if not isinstance(env_id, str) or env_id not in GYM_IDS:
+        raise ValueError(f"unknown environment id {env_id!r}; registered ids are {list(GYM_IDS)}")
+    entry = next(e for e in ENVIRONMENTS.values() if e.gym_id == env_id)
+    structure, params, core = _build(entry, dict(options))
     return DObsEnv(env_id, structure, params, core), params

@@ -1,0 +1,139 @@
+"""Parity of the JAX environments with the compiled core (the gymnax / JaxMARL way of checking a port).
+
+:func:`state_from_core` copies copy ``c`` of a compiled :class:`~dobs_envs.envs.env_core.EnvCore` into an
+:class:`~dobs_envs.jax.params.EnvState`. :func:`one_step_episode` runs an episode of the compiled core
+and, at every step, steps the JAX form from the core's state with the same input, recording the
+largest difference of every quantity; :func:`free_run_episode` runs both side by side from the same
+initial state with a policy acting on each one's own observations (the episode returns then differ
+by what the two simulations' round-off makes of the discontinuous observer term). Used by
+``tests/test_jax_parity.py`` and ``benchmarks/jax_parity.py``.
+
+Differences are reported relative to ``max(1, |compiled value|)`` (the largest over a quantity's
+entries), so that they read as relative errors for large values and absolute ones near zero.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import core as _core
+from .params import EnvState
+
+__all__ = ["state_from_core", "advance_fn", "one_step_episode", "free_run_episode", "QUANTITIES"]
+
+#: the quantities compared by :func:`one_step_episode`
+QUANTITIES = ("t", "x", "x_r", "v", "z", "gamma", "gamma_s", "obs", "reward", "estimation_errors",
+              "tracking_error", "task_error")
+
+
+def state_from_core(core, c: int, dtype) -> EnvState:
+    """Copy ``c`` of the compiled core as a JAX state (``dtype`` the float type)."""
+    s = core.sim_state
+    f = lambda a: jnp.asarray(np.asarray(a, dtype=np.float64), dtype=dtype)  # noqa: E731
+    return EnvState(t=f(s.t[c]), x=f(s.x[c]), z=f(s.z[c]), gamma=f(s.gamma[c]), gamma_s=f(s.gamma_s[c]),
+                    v=f(s.v[c]), x_r=f(s.x_r[c]), u=f(core.applied_inputs[c]),
+                    time=jnp.asarray(int(core.cycles[c]), jnp.int32), sig=f(core._sig[:, c]))
+
+
+_ADVANCE = {}
+
+
+def advance_fn(structure):
+    """``jit(advance)(state, u, params)`` of ``structure`` (one compilation per structure, params traced)."""
+    fn = _ADVANCE.get(id(structure))
+    if fn is None or fn[0] is not structure:
+        fn = (structure, jax.jit(lambda s, u, p: _core.advance(s, u, p, structure)))
+        _ADVANCE[id(structure)] = fn
+    return fn[1]
+
+
+def _task_error(state, structure):
+    if structure.task_positions is None:
+        return None
+    pos = np.asarray(state.x)[structure.task_positions]
+    return float(np.linalg.norm(pos - pos.mean()))
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if a.size == 0:
+        return 0.0
+    fin = np.isfinite(b)
+    if not np.array_equal(fin, np.isfinite(a)):
+        return np.inf
+    scale = max(1.0, float(np.max(np.abs(np.where(fin, b, 0.0)), initial=0.0)))
+    return float(np.max(np.abs(np.where(fin, a - b, 0.0)), initial=0.0)) / scale
+
+
+def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, dtype=jnp.float64,
+                     max_z_diff=None) -> dict:
+    """One episode of the batch-1 compiled ``core`` (reset with ``seed``) with the inputs ``inputs(core, k)
+    -> u (m,)``; at each step the JAX form advances the core's state with the same input.
+
+    Returns ``{quantity: largest difference}`` (module doc), with ``"steps"`` the steps run and
+    ``"ends"`` the number of mismatched terminated / truncated / reason values (0 expected).
+    ``max_z_diff(state, structure, params) -> float``, if given, records under ``"z_band"`` the largest
+    ratio of the observer states' difference to that bound.
+    """
+    adv = advance_fn(structure)
+    core.reset(None, [seed])
+    worst = dict.fromkeys(QUANTITIES, 0.0)
+    worst.update(ends=0, z_band=0.0)
+    k = 0
+    for k in range(steps):
+        u = np.asarray(inputs(core, k), dtype=np.float64)
+        js = state_from_core(core, 0, dtype)
+        ns, out = adv(js, jnp.asarray(u, dtype=dtype), params)
+        res = core.advance(u[None])
+        s = core.sim_state
+        for q in ("t", "x", "x_r", "v", "z", "gamma", "gamma_s"):
+            worst[q] = max(worst[q], _rel(getattr(ns, q), getattr(s, q)[0]))
+        if max_z_diff is not None:
+            band = max_z_diff(js, structure, params)
+            dz = float(np.max(np.abs(np.asarray(ns.z) - s.z[0]), initial=0.0))
+            worst["z_band"] = max(worst["z_band"], dz / band)
+        worst["obs"] = max(worst["obs"], _rel(out.obs, core.observations[0]))
+        worst["reward"] = max(worst["reward"], _rel(out.reward, res.reward[0]))
+        worst["estimation_errors"] = max(worst["estimation_errors"],
+                                         _rel(out.features.estimation_errors, core.estimation_errors[0]))
+        worst["tracking_error"] = max(worst["tracking_error"], _rel(out.features.tracking_error,
+                                                                   core.tracking_errors[0]))
+        te = _task_error(ns, structure)
+        if te is not None:
+            worst["task_error"] = max(worst["task_error"], _rel(te, core.task_errors()[0]))
+        worst["ends"] += int(bool(out.terminated) != bool(res.terminated[0])) \
+            + int(bool(out.truncated) != bool(res.truncated[0])) + int(int(out.reason) != int(res.reason[0]))
+        if res.terminated[0] or res.truncated[0]:
+            break
+    worst["steps"] = k + 1
+    return worst
+
+
+def free_run_episode(penv, structure, params, make_policy, *, seed: int, dtype=jnp.float64) -> tuple:
+    """The returns of one episode of the PettingZoo env ``penv`` and of the JAX form from the same initial
+    state (``penv.reset(seed=seed)``'s), each driven by its own ``make_policy(penv)`` (``policy.inputs(obs
+    dict) -> u``) on its own observations. Returns ``(return_compiled, return_jax, steps)``."""
+    obs, _ = penv.reset(seed=seed)
+    core = penv.core
+    s = core.sim_state
+    js = _core.initial_state(params, structure, s.x[0], v0=s.v[0], x_r0=s.x_r[0], sig=core._sig[:, 0])
+    adv = advance_fn(structure)
+    pa, pb = make_policy(penv), make_policy(penv)
+    agents, widths = structure.agents, structure.obs_widths
+    split = lambda o: {a: np.asarray(o[i, :w]) for i, (a, w) in enumerate(zip(agents, widths))}  # noqa: E731
+    jobs = split(_core.observations(_core.features(js, params, structure), structure))
+    ra = rb = 0.0
+    k = 0
+    for k in range(int(params.max_steps_in_episode)):
+        ua, ub = pa.inputs(obs), pb.inputs(jobs)
+        obs, r, te, tr, _ = penv.step(penv.actions_from_inputs(ua))
+        js, out = adv(js, jnp.asarray(ub, dtype=dtype), params)
+        jobs = split(out.obs)
+        a0 = agents[0]
+        ra += r[a0]
+        rb += float(out.reward)
+        if te[a0] or tr[a0]:
+            break
+    return ra, rb, k + 1
+
