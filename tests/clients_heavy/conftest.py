@@ -1,5 +1,5 @@
-"""Heavy clients (RLlib, BenchMARL): their pins (ray[rllib] 2.60 needs gymnasium 1.2.2,
-BenchMARL torchrl < 0.12) conflict with the main test environment, so this directory is left
+"""Heavy clients (RLlib, BenchMARL, and the JAX libraries gymnax, JaxMARL, rejax): their pins (ray[rllib]
+2.60 needs gymnasium 1.2.2, BenchMARL torchrl < 0.12, gymnax gymnasium < 1.4) conflict with the main test environment, so this directory is left
 out of the main suite (``norecursedirs`` in pyproject.toml) and run by ``.ci/run`` in its own
 virtual environment (``.ci/venv-clients``, see ``.ci/clients-heavy.txt``):
 
