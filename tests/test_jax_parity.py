@@ -3,8 +3,8 @@
 One-step parity along whole episodes: at every step of an episode of the compiled core the JAX form
 advances the core's own state with the same input; every quantity is compared (next state,
 observations, reward, errors, termination, truncation and reason codes). Action sources: random
-inputs (a fifth outside the bounds: clipping), bang-bang inputs beyond the bounds, and the paper's
-controller. float64 throughout (``jax.enable_x64``).
+inputs (a fifth outside the bounds: clipping), bang-bang inputs beyond the bounds, the paper's
+controller, and a PPO policy trained briefly on the Gymnasium env. float64 throughout (``jax.enable_x64``).
 
 Tolerances. The plant, reference model, exosystem, time and reward do not depend on the observers
 within a step: both implementations evaluate the same float64 expressions in another order, so they
@@ -100,10 +100,29 @@ def _paper(name, options):
     return inputs
 
 
+def _trained(name, options):
+    """A PPO policy trained briefly on the Gymnasium env (SB3, 512 steps): network-shaped actions."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    import gymnasium as gym
+
+    from dobs_envs.envs.adapter import CoreAdapter
+
+    genv = gym.make(ENVIRONMENTS[name].gym_id, **options)
+    model = sb3.PPO("MlpPolicy", genv, n_steps=256, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.learn(512)
+
+    def inputs(core, k):
+        obs = CoreAdapter(core).central_observations(0)
+        action, _ = model.predict(obs, deterministic=True)
+        return CoreAdapter(core).central_inputs(np.asarray(action, dtype=np.float64))
+    return inputs
+
+
 CASES = [
     ("tracking", {}, "random"),
     ("tracking", {}, "bang_bang"),
     ("tracking", {}, "paper"),
+    ("tracking", {}, "trained"),
     ("tracking", {"observation": "full", "reward": "log", "normalized_actions": True, "padded_observations": True},
      "random"),
     ("disturbance_rejection", {}, "random"),
@@ -111,6 +130,7 @@ CASES = [
     ("disturbance_rejection", {"disturbance": "random", "reward": "sqrt"}, "random"),
     ("hetero_mas", {}, "random"),
     ("hetero_mas", {}, "paper"),
+    ("hetero_mas", {}, "trained"),
     ("hetero_mas", {"state_bound": 30.0}, "bang_bang"),
     ("random_network", {}, "paper"),
     ("random_network", {"padded_observations": True, "termination_penalty": False, "observation": "full"}, "bang_bang"),
@@ -123,7 +143,8 @@ def test_one_step_parity_along_an_episode(name, options, source):
     if "state_bound" in options:  # params differ from the cached structure's only in the bound: no recompilation
         params = params.replace(state_bound=jnp.asarray(options["state_bound"], params.state_bound.dtype))
     rng = np.random.default_rng(7)
-    inputs = {"random": _random(rng), "bang_bang": _bang_bang(rng), "paper": _paper(name, options)}[source]
+    inputs = {"random": lambda: _random(rng), "bang_bang": lambda: _bang_bang(rng),
+              "paper": lambda: _paper(name, options), "trained": lambda: _trained(name, options)}[source]()
     w = parity.one_step_episode(core, structure, params, inputs, seed=10_000, steps=200,
                                 max_z_diff=_chattering_band)
     assert w["ends"] == 0, f"termination/truncation/reason differ ({w})"
