@@ -1,6 +1,7 @@
 """The parity table of the JAX environments against the compiled core (float64).
 
-For every environment x option set x action source: an episode of the compiled core in which, at every
+For every environment x option set x action source (random inputs, bang-bang inputs beyond the bounds, the
+paper's controller, a PPO policy trained briefly with SB3): an episode of the compiled core in which, at every
 step, the JAX form advances the core's own state with the same input (:func:`dobs_envs.jax.parity.
 one_step_episode`); the table gives the largest difference of every quantity relative to
 ``max(1, |value|)``, and the mismatched terminations / truncations / reason codes (0 expected). Then the
@@ -26,7 +27,7 @@ CASES = [
     ("hetero_mas", {}), ("hetero_mas", {"state_bound": 30.0, "termination_penalty": False}),
     ("random_network", {}), ("random_network", {"padded_observations": True, "observation": "full"}),
 ]
-SOURCES = ("random", "bang_bang", "paper")
+SOURCES = ("random", "bang_bang", "paper", "trained")
 COLUMNS = ("x", "z", "gamma", "gamma_s", "v", "x_r", "obs", "reward", "estimation_errors", "tracking_error",
            "task_error")
 
@@ -63,6 +64,19 @@ def main(argv=None) -> int:
                     inputs = lambda c, k, rng=rng: rng.uniform(-1.2, 1.2, c.n_inputs) * c.action_bound  # noqa: E731
                 elif src == "bang_bang":
                     inputs = lambda c, k, rng=rng: 1.2 * c.action_bound * rng.choice([-1.0, 1.0], c.n_inputs)  # noqa: E731
+                elif src == "trained":  # PPO trained briefly on the Gymnasium env (SB3, 2048 steps)
+                    import gymnasium as gym
+                    from stable_baselines3 import PPO
+
+                    from dobs_envs.envs.adapter import CoreAdapter
+
+                    model = PPO("MlpPolicy", gym.make(entry.gym_id, **opts), n_steps=512, batch_size=64, n_epochs=2,
+                                seed=0, device="cpu").learn(2048)
+
+                    def inputs(c, k, model=model):
+                        ad = CoreAdapter(c)
+                        a_, _ = model.predict(ad.central_observations(0), deterministic=True)
+                        return ad.central_inputs(np.asarray(a_, dtype=np.float64))
                 else:
                     pe = mod.parallel_env(**opts)
                     pol = SeparationPolicy(pe)
