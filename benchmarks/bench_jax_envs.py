@@ -10,8 +10,8 @@ Figures are CPU seconds of this process (``time.process_time``: robust to other 
 machine) and wall seconds; XLA runs on one thread (``PJRT_NPROC=1``, set before JAX is imported
 unless already set) and the compiled core on one thread, so the ratio compares one core with one
 core. Compilation is excluded (one warm-up call). The lock-step cost of the split Euler steps under
-``vmap`` (``--lockstep``): the same rollout when one copy of the batch has gains so large that
-every one of its Euler steps is split.
+``vmap`` (``--lockstep G ...``): the same rollout (float64) when one copy of the batch has gains ``G`` so
+large that every one of its Euler steps is split.
 
     python benchmarks/bench_jax_envs.py --env tracking --batch 1 64 1024 4096 --out results/bench_jax_envs.json
 """
@@ -59,7 +59,7 @@ def bench_core(env_id: str, B: int, steps: int, repeats: int) -> dict:
     return {"cpu_s": cpu, "wall_s": wall, "steps_per_s_cpu": B * steps / cpu, "steps_per_s_wall": B * steps / wall}
 
 
-def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockstep: bool = False) -> dict:
+def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockstep: float = 0.0) -> dict:
     import jax
     import jax.numpy as jnp
 
@@ -69,8 +69,8 @@ def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockste
         env, params = make(env_id, dtype=dtype)
         m = env.structure.m
         _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(0), B), params)
-        if lockstep:  # copy 0 splits every Euler step: its gains far beyond 1 / (2 deg dt)
-            state = state.replace(gamma=state.gamma.at[0].set(1e4))
+        if lockstep:  # copy 0 splits every Euler step: its gains beyond 1 / (2 deg dt)
+            state = state.replace(gamma=state.gamma.at[0].set(lockstep))
         lo, hi = params.action_low, params.action_high
 
         @jax.jit
@@ -97,7 +97,9 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, nargs="+", default=[1, 64, 1024, 4096])
     ap.add_argument("--steps", type=int, default=0, help="control steps per timed call (default: 2e5 / B, 20..400)")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--lockstep", action="store_true", help="also time the rollout with one always-splitting copy")
+    ap.add_argument("--lockstep", type=float, nargs="*", default=[],
+                    help="also time the rollout with copy 0's gains gamma_i set to each of these values (its Euler "
+                         "steps then split: at gamma_i = 1e3 on tracking into about 4, at 1e4 into about 40)")
     ap.add_argument("--out", help="write the figures as JSON (refuses to overwrite)")
     a = ap.parse_args(argv)
     if a.out and os.path.exists(a.out):
@@ -115,8 +117,8 @@ def main(argv=None) -> int:
         row = {"B": B, "steps": steps, "core": bench_core(env_id, B, steps, a.repeats)}
         for dt in ("float64", "float32"):
             row[f"jax_{dt}"] = bench_jax(env_id, B, steps, a.repeats, dt)
-        if a.lockstep and B > 1:
-            row["jax_float64_lockstep"] = bench_jax(env_id, B, steps, a.repeats, "float64", lockstep=True)
+        for g in a.lockstep if B > 1 else ():
+            row[f"jax_float64_lockstep_{g:g}"] = bench_jax(env_id, B, steps, a.repeats, "float64", lockstep=g)
         rows.append(row)
         c = row["core"]["steps_per_s_cpu"]
         msg = " | ".join(f"{k} {v['steps_per_s_cpu']:,.0f}/s ({v['steps_per_s_cpu'] / c:.2f}x)"
