@@ -215,3 +215,10 @@ def test_bad_actions_get_a_specific_error():
     _, s = menv.reset(jax.random.PRNGKey(0))
     with pytest.raises(ValueError, match="one action per agent"):
         menv.step(jax.random.PRNGKey(0), s, {"controller_0": jnp.zeros(1)})
+
+
+def test_a_float64_env_refuses_to_run_without_x64():
+    with jax.enable_x64(True):
+        env, params = make("dobs_envs/Tracking-v0", dtype="float64")
+    with jax.enable_x64(False), pytest.raises(ValueError, match="64-bit JAX is off"):
+        env.reset(jax.random.PRNGKey(0))

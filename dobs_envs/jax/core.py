@@ -109,8 +109,16 @@ def bound_step_cost(params, structure):
     return _shaped(params.lam_q * params.state_bound ** 2, params, structure) * (params.dt * structure.substeps)
 
 
+def _check_x64(structure) -> None:
+    """A float64 environment traced without 64-bit JAX would run in float32 silently: refuse it."""
+    if structure.dtype == np.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("this environment was made with dtype='float64' but 64-bit JAX is off here: call "
+                         "jax.config.update('jax_enable_x64', True) (or make it with dtype='float32')")
+
+
 def advance(state: EnvState, u, params, structure) -> tuple[EnvState, StepOut]:
     """One control step of one copy with the input ``u (m,)`` (module doc). Returns ``(state, out)``."""
+    _check_x64(structure)
     p, st = params, structure
     period = p.dt * st.substeps
     u = jnp.minimum(jnp.maximum(u.astype(st.dtype), p.action_low), p.action_high)
@@ -164,6 +172,7 @@ def initial_state(params, structure, x0, v0=None, x_r0=None, sig=None) -> EnvSta
 def reset(key, params, structure) -> EnvState:
     """A reset draw of one copy (:class:`~dobs_envs.envs.distributions.ResetDistribution`'s distributions,
     drawn with ``jax.random``)."""
+    _check_x64(structure)
     st, dt = structure, structure.dtype
     kx, kv = jax.random.split(key)
     if st.x0_uniform:
