@@ -20,4 +20,9 @@ def test_the_heavy_blocks_are_found():
 
 @pytest.mark.parametrize("sid,code,marker", HEAVY, ids=[s[0] for s in HEAVY])
 def test_heavy_block_runs(sid, code, marker, tmp_path, monkeypatch):
-    run_snippet(sid, code, tmp_path, monkeypatch)
+    import ray
+
+    try:
+        run_snippet(sid, code, tmp_path, monkeypatch)
+    finally:
+        ray.shutdown()  # the RLlib block starts a local Ray: its workers would slow the next block down
