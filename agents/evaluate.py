@@ -138,7 +138,40 @@ def run_episode(env, policy: Callable, seed: int, *, parallel: bool) -> EpisodeR
 
 def evaluate_policy(env, policy: Callable, episodes: int, seed: int, *, parallel: bool,
                     progress: bool = False, desc: str = "") -> list[EpisodeResult]:
-    """``episodes`` episodes with seeds ``seed, seed + 1, ...``."""
+    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``.
+
+    The environments draw the initial state (and reference, disturbance, fault processes) from the
+    reset seed, so two policies evaluated with the same ``seed`` and ``episodes`` see the same
+    episodes: the ratio of their episode costs is the benchmark's cost ratio ``J / J_paper`` when
+    the second policy is the paper's controller (:class:`baselines.policies.SeparationPolicy`).
+
+    Parameters
+    ----------
+    env : PettingZoo ParallelEnv or Gymnasium Env
+        A dobs_envs environment (``tracking_v0.parallel_env()``, ``gym.make("dobs_envs/Tracking-v0")``,
+        or either wrapped); the metrics are read from the underlying simulation.
+    policy : callable
+        ``policy(observations) -> actions``: a dict per agent when ``parallel`` is true, else one
+        array for the centralised Gymnasium view. A ``reset()`` method, if any, is called before
+        every episode.
+    episodes : int
+        Number of episodes.
+    seed : int
+        Seed of the first episode. Use the tuning range (20000-29999, :mod:`agents.seeds`) while you
+        develop a policy; the benchmark's evaluation range 10000-19999 is for final tables.
+    parallel : bool
+        ``True`` for the PettingZoo dict API, ``False`` for the Gymnasium API.
+    progress : bool
+        Show a progress bar.
+    desc : str
+        Label of the progress bar.
+
+    Returns
+    -------
+    list of EpisodeResult
+        One per episode, in seed order; ``result.cost`` is the episode's cost ``J`` (with the
+        termination penalty), ``result.failed`` whether it left the state bound.
+    """
     it = range(episodes)
     if progress:
         from tqdm.auto import tqdm

@@ -1,4 +1,4 @@
-"""Compare a README results table with the ``results.json`` its command writes: number by number, each
+"""Compare a published results table (a Markdown page of the docs, ``docs/results/*.md``) with the ``results.json`` its command writes: number by number, each
 with a tolerance suited to its quantity (not text: a chattering steady-state error differs in its last
 digits between machines, 0.000806 against 0.000804 was seen)."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import re
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _NUM = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
-#: README column header -> (results.json keys of the numbers in the cell, relative tolerance beyond the
+#: table column header -> (results.json keys of the numbers in the cell, relative tolerance beyond the
 #: printed rounding). Cost ratios and costs are sums of the same floating-point terms (1e-3 covers other
 #: BLAS/CPU rounding); the steady-state error is an RMS of a chattering O(dt gamma) band (25 %: a paper row
 #: printed 5.45e-5 gave 6.08e-5, 12 % more, on an AVX-512 machine); the
@@ -31,9 +31,9 @@ COLUMNS = {
 }
 
 
-def readme_rows(heading: str) -> tuple[list[str], list[list[str]]]:
-    """Header and rows of the first Markdown table under ``heading`` in README.md."""
-    lines = open(os.path.join(ROOT, "README.md")).read().splitlines()
+def readme_rows(page: str, heading: str) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the Markdown table under ``heading`` in ``page`` (relative to the repository)."""
+    lines = open(os.path.join(ROOT, page)).read().splitlines()
     start = lines.index(heading) + 1
     end = next((i for i in range(start, len(lines)) if lines[i].startswith("#")), len(lines))
     table = [line for line in lines[start:end] if line.startswith("|")]
@@ -48,9 +48,9 @@ def _printed_tolerance(text: str) -> float:
     return 0.5 * 10.0 ** (-decimals + (int(exp) if exp else 0))
 
 
-def check_readme_table(heading: str, results_json: str) -> None:
-    """Every row of the README's table under ``heading`` is what ``results_json`` gives."""
-    header, rows = readme_rows(heading)
+def check_readme_table(page: str, heading: str, results_json: str) -> None:
+    """Every row of the table under ``heading`` in ``page`` is what ``results_json`` gives."""
+    header, rows = readme_rows(page, heading)
     doc = json.load(open(results_json))
     got = {r["policy"]: r for r in doc["results"]}
     assert {r[0] for r in rows} == set(got), (heading, sorted(got))

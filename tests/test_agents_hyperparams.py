@@ -152,7 +152,7 @@ def test_overrides_accept_both_vocabularies():
 
 def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
     """rl-zoo3 evaluates with the recipe's training-only env_kwargs (its eval env and rl_zoo3.enjoy);
-    the README and agents/config.py tell how to give it the task's own state_bound (issue 19, item 6)."""
+    the docs (integrations page) and agents/config.py tell how to give it the task's own state_bound."""
     import os
     import re
 
@@ -160,7 +160,7 @@ def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
     from dobs_envs.envs.options import EnvOptions
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    readme = open(os.path.join(root, "README.md")).read()
+    readme = open(os.path.join(root, "docs", "integrations.md")).read()
     import agents.config as cfg
 
     task = EnvOptions.defaults()["state_bound"]

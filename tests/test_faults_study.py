@@ -184,10 +184,11 @@ def test_cli_refuses_to_overwrite_and_rejects_step_options(tmp_path, capsys):
 
 
 def test_readme_table_is_the_stored_results():
-    """README's table is :func:`markdown_table` of results/faults_ne2.json (the stored full run)."""
+    """The published table (docs/results/paper.md) is :func:`markdown_table` of results/faults_ne2.json
+    (the stored full run)."""
     res = json.load(open(os.path.join(ROOT, "results", "faults_ne2.json")))
     assert res["seeds"] == list(range(10)) and res["t_end"] == 20.0
-    assert markdown_table(res) in open(os.path.join(ROOT, "README.md")).read()
+    assert markdown_table(res) in open(os.path.join(ROOT, "docs", "results", "paper.md")).read()
 
 
 def test_settled_criterion():

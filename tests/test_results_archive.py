@@ -1,6 +1,6 @@
-"""The stored run records behind the README's tables (``results/*.tar.gz``) still answer today's
-benchmark: the README's command on them trains nothing and gives the README's tables, number by
-number (:mod:`readme_tables`)."""
+"""The stored run records behind the published tables (``results/*.tar.gz``; the tables are in
+``docs/results/*.md``) still answer the current benchmark: the documented command on them trains
+nothing and gives the published tables, number by number (:mod:`readme_tables`)."""
 from __future__ import annotations
 
 import os
@@ -13,24 +13,27 @@ from readme_tables import check_readme_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ARCHIVES = {
-    # archive -> (env argument, budget, runs, {env: README heading of its table}, --agents (None: the budget's))
+    # archive -> (env argument, budget, runs, {env: (docs page, heading of its table)}, --agents (None: the budget's))
     # the budget's nine agents: the six PPO-family ones (10 runs each), SAC, TD3 and CrossQ at PPO's step
     # count (5 runs each, AGENT_SEEDS)
     "hetero_mas_full_runs.tar.gz": ("hetero_mas", "full", 75,
-                                    {"hetero_mas": "### RL versus the paper's controller (full budget, hetero_mas)"},
+                                    {"hetero_mas": ("docs/results/full_hetero_mas.md",
+                                                    "## RL versus the paper's controller (full budget, hetero_mas)")},
                                     None),
     "quick_all_runs.tar.gz": ("all", "quick", 48,
-                              {e: f"#### {e} (quick budget)" for e in
+                              {e: ("docs/results/quick.md", f"## {e} (quick budget)") for e in
                                ("tracking", "disturbance_rejection", "hetero_mas", "random_network")}, None),
     # issue 23: the faulted environment, the quick budget's agents
     "tracking_lossy_quick_runs.tar.gz": ("tracking_lossy", "quick", 12,
-                                         {"tracking_lossy": "#### tracking_lossy (quick budget)"}, None),
+                                         {"tracking_lossy": ("docs/results/quick.md", "## tracking_lossy (quick budget)")}, None),
     # issue 22: today's PPO recipe and dobs-envs tune's best recipe (RECIPES), 10 runs each
     "hetero_mas_tuned_runs.tar.gz": ("hetero_mas", "full", 20,
-                                     {"hetero_mas": "#### The tuned PPO recipe on hetero_mas (full budget)"}, ["ppo"]),
+                                     {"hetero_mas": ("docs/results/tuned_ppo.md",
+                                                    "## The tuned PPO recipe on hetero_mas (full budget)")}, ["ppo"]),
     # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
     "tracking_full_runs.tar.gz": ("tracking", "full", 90,
-                                  {"tracking": "### RL versus the paper's controller (full budget, tracking)"}, None),
+                                  {"tracking": ("docs/results/full_tracking.md",
+                                                "## RL versus the paper's controller (full budget, tracking)")}, None),
 }
 
 #: ``--recipe AGENT=FILE`` of an archive's command (paths relative to the repository)
@@ -60,7 +63,7 @@ def extracted(request, tmp_path_factory):
 
 
 def test_every_stored_run_is_reused_with_todays_recipes(extracted):
-    """A recipe edit that changes an agent's training makes its stored runs stale: the README's tables
+    """A recipe edit that changes an agent's training makes its stored runs stale: the published tables
     would then no longer be what the command gives (retrain, re-archive)."""
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]
@@ -69,9 +72,9 @@ def test_every_stored_run_is_reused_with_todays_recipes(extracted):
     assert [(sp["env"], sp["agent"], sp["seed"]) for sp in pending_runs(plan)] == []
 
 
-def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
-    """The README's command on the stored records (no training: every run is stored) gives the tables
-    printed in the README: the analytic controllers are evaluated again on the same seeded episodes,
+def test_the_published_tables_are_what_the_stored_runs_give(extracted):
+    """The documented command on the stored records (no training: every run is stored) gives the tables
+    printed in ``docs/results``: the analytic controllers are evaluated again on the same seeded episodes,
     the statistics recomputed from the stored per-episode costs; numbers are compared, each with a
     tolerance suited to its quantity."""
     from agents.benchmark import run_benchmark
@@ -80,8 +83,8 @@ def test_the_readme_tables_are_what_the_stored_runs_give(extracted):
     env, budget, _, headings, agents = ARCHIVES[name]
     assert pending_runs(plan_runs(env, budget, out, agents=agents, **_options(name))) == []  # or hours of training
     run_benchmark(env, budget, out, workers=1, progress=False, agents=agents, **_options(name))
-    for e, heading in headings.items():
-        check_readme_table(heading, os.path.join(out, e, "results.json"))
+    for e, (page, heading) in headings.items():
+        check_readme_table(page, heading, os.path.join(out, e, "results.json"))
 
 
 def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):

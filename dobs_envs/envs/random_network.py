@@ -104,10 +104,10 @@ class RandomNetworkEnv(DObsParallelEnv):
     ## Version History
 
     * v0: initial release.
-    * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
+    * v0: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
       observation widths differ (before: always, doubling the width; the default spaces are
       unchanged).
-    * v0, issue 23: option ``faults`` (default None: unchanged).
+    * v0: option ``faults`` added (default None: unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "random_network_v0", "is_parallelizable": True, "render_fps": 20}

@@ -162,10 +162,10 @@ class TrackingEnv(DObsParallelEnv):
     ## Version History
 
     * v0: initial release.
-    * v0, issue 19: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
+    * v0: ``padded_observations=True`` pads and adds ``obs_mask`` only where the agents'
       observation widths differ (before: always, doubling the width; the default spaces are
       unchanged).
-    * v0, issue 23: option ``faults`` (default None: unchanged).
+    * v0: option ``faults`` added (default None: unchanged).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "tracking_v0", "is_parallelizable": True, "render_fps": 20}
@@ -215,7 +215,7 @@ class TrackingLossyEnv(TrackingEnv):
     - ``oo_period = 0.01`` s: the observer nodes exchange estimates every 10 ms (10 Euler steps,
       5 exchanges per control period) and hold the received copies in between: a realistic
       network rate. (Holding them for a whole control period of 0.05 s dominated every other
-      fault in the issue's first estimate; 10 ms keeps the task about the faults below.)
+      fault in a first estimate; 10 ms keeps the task about the faults below.)
     - ``oo_loss = 0.1``: each directed O-O link loses all its packets of a control period with
       probability 0.1 (the receiver keeps the last value it got);
     - ``co_loss = 0.05``: each controller's C-O packet is lost with probability 0.05 per step
@@ -227,7 +227,7 @@ class TrackingLossyEnv(TrackingEnv):
     No delays and a fixed ring graph: the paper's Assumption ooconnected holds at every instant,
     so the paper's controller (``baselines.policies.SeparationPolicy``) still tracks, with a
     larger error floor (RMS tracking error over the last 5 s of the 20 s episode: 0.13 here
-    against 0.03 in ``tracking_v0``, and 0.49 with ``oo_period = 0.05``; seeds 0 and 1, issue 23);
+    against 0.03 in ``tracking_v0``, and 0.49 with ``oo_period = 0.05``; seeds 0 and 1);
     learning policies may exploit the ``received`` mask.
 
     ## Observation Space
@@ -260,7 +260,7 @@ class TrackingLossyEnv(TrackingEnv):
 
     ## Version History
 
-    * v0: initial release (issue 23).
+    * v0: initial release.
     """
 
     Options = TrackingLossyOptions
