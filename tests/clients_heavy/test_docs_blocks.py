@@ -1,4 +1,4 @@
-"""The documentation's RLlib and BenchMARL blocks (marked ``<!-- snippet: heavy-clients ... -->`` in
+"""The documentation's RLlib, BenchMARL and rejax blocks (marked ``<!-- snippet: heavy-clients ... -->`` in
 docs/*.md) run here, in the heavy-clients virtual environment; the main suite's
 tests/test_docs_snippets.py runs every other block and skips these."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ HEAVY = [s for s in SNIPPETS if s[2] and "snippet: heavy-clients" in s[2]]
 
 
 def test_the_heavy_blocks_are_found():
-    assert len(HEAVY) == 2, [s[0] for s in HEAVY]
+    assert len(HEAVY) == 3, [s[0] for s in HEAVY]
 
 
 @pytest.mark.parametrize("sid,code,marker", HEAVY, ids=[s[0] for s in HEAVY])
