@@ -50,7 +50,8 @@ def add_parser(sub) -> None:
                    help="continue the interrupted run in DIR from its last save (model.zip after Ctrl-C, else the "
                         "last checkpoint) with the run's own configuration")
     p.add_argument("--allow-custom-env", action="store_true",
-                   help="accept --env 'package.module:factory' (imports that code)")
+                   help="accept --env 'package.module:factory' (imports that module and calls the factory; with "
+                        "--resume: the run's config.json may name one)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--verbose", type=int, default=0)
     p.set_defaults(func=_train)
@@ -65,8 +66,10 @@ def add_parser(sub) -> None:
     p.add_argument("--json", default=None, help="also write the summary to this file (a new file; see --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--allow-custom-env", action="store_true",
-                   help="accept a run whose config.json names 'package.module:factory' (imports that code; "
-                        "model.zip and vecnormalize.pkl are pickles: load only runs you trust)")
+                   help="accept a run whose config.json names 'package.module:factory' (imports that module and "
+                        "calls the factory: only that; the run's pickles never run code either way: model.zip and "
+                        "vecnormalize.pkl are read with an allow-list of the run's own data, except the networks "
+                        "of SBX runs, which SBX saves cloudpickled: evaluate those only from sources you trust)")
     p.set_defaults(func=_evaluate)
 
     p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "
