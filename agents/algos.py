@@ -286,12 +286,16 @@ class AlgoBackend:
         """The model saved in ``path`` by a run of ``recipe``, nothing unpickled but plain data
         (:func:`agents.run_pickles.model_custom_objects`; raises :class:`agents.run_pickles.PickleRefused` for a
         payload it does not rebuild); ``venv``, ``kwargs`` as for :meth:`load`."""
-        from .run_pickles import model_custom_objects
+        from .run_pickles import graft_sbx, model_custom_objects, sbx_payloads
 
         custom = model_custom_objects(path, self.rebuilt_objects(recipe, venv), library=self.library)
+        payloads = sbx_payloads(path) if self.library == "sbx-rl" else {}  # read before anything is built
         if venv is not None:
             kwargs["env"] = venv
-        return self.load(path, device=device, custom_objects=custom, **kwargs)
+        model = self.load(path, device=device, custom_objects=custom, **kwargs)
+        if payloads:
+            graft_sbx(model, path, payloads, optimizer=venv is not None)
+        return model
 
     def save(self, model, path: str) -> None:
         """Save ``model`` to exactly ``path`` (give it a suffix: SB3 appends ``.zip`` to a path without one)."""

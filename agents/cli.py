@@ -68,8 +68,7 @@ def add_parser(sub) -> None:
     p.add_argument("--allow-custom-env", action="store_true",
                    help="accept a run whose config.json names 'package.module:factory' (imports that module and "
                         "calls the factory: only that; the run's pickles never run code either way: model.zip and "
-                        "vecnormalize.pkl are read with an allow-list of the run's own data, except the networks "
-                        "of SBX runs, which SBX saves cloudpickled: evaluate those only from sources you trust)")
+                        "vecnormalize.pkl are read as data against an allow-list of what a run holds)")
     p.set_defaults(func=_evaluate)
 
     p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "

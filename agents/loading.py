@@ -6,8 +6,8 @@ multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEnc
 one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
 loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`).
 ``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`:
-a refused class raises :class:`agents.run_pickles.PickleRefused`, a :class:`RunDirError`), except the
-cloudpickled networks of SBX runs (see that module's limitation).
+a refused class raises :class:`agents.run_pickles.PickleRefused`, a :class:`RunDirError`; SBX networks are
+read as arrays into a fresh policy).
 """
 from __future__ import annotations
 

@@ -16,9 +16,14 @@ its pickles:
   episode buffers, ``train_freq``) restricted-unpickled as above, so SB3 unpickles nothing. A payload of
   any other entry is refused. Weights are read by SB3 with ``torch.load(weights_only=True)``.
 
-Limitation: SBX (the jax backend of SAC / TD3 / CrossQ) keeps its networks' weights inside the cloudpickled
-``policy`` entry itself (with flax ``TrainState`` objects holding code); :data:`SBX_WEIGHT_ENTRIES` are
-still unpickled for runs whose ``config.json`` records ``library`` ``sbx-rl``.
+- SBX (the jax backend of SAC / TD3 / CrossQ) keeps its networks inside the cloudpickled ``policy`` entry
+  (flax ``TrainState`` objects, with functions and classes pickled by value). Those payloads are read by
+  :class:`_OpaqueUnpickler`: numpy data and jax arrays (rebuilt from their numpy state) are real, anything
+  else becomes an inert :class:`_Opaque` record of its arguments (nothing is imported, looked up or
+  called); SBX builds a fresh policy from the rebuilt recipe objects and :func:`graft_sbx` copies the
+  recorded arrays into it (parameters, target parameters, batch statistics, steps, optimizer states,
+  the policy's PRNG keys), checking every array's shape against the fresh model's: the model equals SBX's
+  own (unrestricted) load array for array.
 """
 from __future__ import annotations
 
@@ -28,10 +33,12 @@ import json
 import pickle
 import zipfile
 
+import numpy as np
+
 from .runs import RunDirError
 
 __all__ = ["PickleRefused", "RestrictedUnpickler", "restricted_load", "load_vecnormalize", "load_replay_buffer",
-           "model_custom_objects", "REBUILT_ENTRIES", "DATA_ENTRIES", "SBX_WEIGHT_ENTRIES"]
+           "model_custom_objects", "sbx_payloads", "graft_sbx", "REBUILT_ENTRIES", "DATA_ENTRIES", "SBX_WEIGHT_ENTRIES"]
 
 
 class PickleRefused(RunDirError):
@@ -139,6 +146,10 @@ def load_replay_buffer(model, path: str) -> None:
 
         buf.handle_timeout_termination = False
         buf.timeouts = np.zeros_like(buf.dones)
+    if type(model).__module__.startswith("sbx."):  # as SBX's load_replay_buffer: numpy conversions on the cpu
+        from stable_baselines3.common.utils import get_device
+
+        buf.device = get_device("cpu")
     model.replay_buffer = buf
 
 
@@ -149,8 +160,151 @@ REBUILT_ENTRIES = ("policy_class", "policy_kwargs", "learning_rate", "lr_schedul
 #: ``model.zip`` entries of plain data, read with :data:`MODEL_DATA_CLASSES` only
 DATA_ENTRIES = ("observation_space", "action_space", "_last_obs", "_last_episode_starts", "_last_original_obs",
                 "ep_info_buffer", "ep_success_buffer", "train_freq", "target_entropy")
-#: SBX's cloudpickled networks (weights inside): see the module's limitation
+#: SBX's cloudpickled networks and PRNG key: rebuilt fresh by SBX, their arrays grafted (:func:`graft_sbx`)
 SBX_WEIGHT_ENTRIES = ("policy", "actor", "qf", "ent_coef", "ent_coef_state", "key")
+
+
+class _Opaque:
+    """What :class:`_OpaqueUnpickler` makes of anything not admitted: a record of the arguments it was
+    called / built with (``_args``, ``_state``, ``_items``); nothing it names is imported or run."""
+
+    _name = "?"
+
+    def __new__(cls, *args, **kwargs):  # NEWOBJ (e.g. a namedtuple: its fields) calls only this
+        obj = object.__new__(cls if isinstance(cls, type) else type(cls))  # cls may be an opaque "class"
+        obj._args, obj._state, obj._items = args, None, []
+        return obj
+
+    def __init__(self, *args, **kwargs):
+        self._args = args
+
+    def __call__(self, *args, **kwargs):
+        return _Opaque(*args)
+
+    def __setstate__(self, state):
+        self._state = state
+
+    def __setitem__(self, key, value):
+        self._items.append((key, value))
+
+    def append(self, value):
+        self._items.append(value)
+
+    def extend(self, values):
+        self._items.extend(values)
+
+
+def _jax_array(fun, args, arr_state, aval_state):
+    """``jax._src.array._reconstruct_array`` for numpy-backed arrays only (the array stays numpy)."""
+    if not isinstance(fun, type(pickle.loads)) or getattr(fun, "__name__", "") != "_reconstruct":
+        raise pickle.UnpicklingError("a jax array not rebuilt from numpy")
+    arr = fun(*args)
+    arr.__setstate__(arr_state)
+    return arr
+
+
+class _OpaqueUnpickler(pickle.Unpickler):
+    """:data:`MODEL_DATA_CLASSES` for real, jax arrays as numpy arrays, any other global an :class:`_Opaque`
+    subclass named after it (never imported)."""
+
+    def find_class(self, module, name):
+        if (module, name) in MODEL_DATA_CLASSES:
+            return super().find_class(module, name)
+        if (module, name) == ("jax._src.array", "_reconstruct_array"):
+            return _jax_array
+        return type("Opaque", (_Opaque,), {"_name": f"{module}.{name}"})
+
+    def persistent_load(self, pid):
+        raise pickle.UnpicklingError("persistent id")
+
+
+def _plain(o):
+    """A recorded pytree as jax flattens it: an opaque ``FrozenDict`` its dict, an opaque namedtuple (optax
+    states) the tuple of its fields; dicts, lists, tuples recursively; arrays and scalars as they are."""
+    if isinstance(o, _Opaque):
+        return tuple(_plain(a) for a in o._args) if not o._name.endswith("FrozenDict") else _plain(o._args[0])
+    if isinstance(o, dict):
+        return {k: _plain(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return type(o)(_plain(v) for v in o)
+    return o
+
+
+def _leaves(o) -> list:
+    """The leaves of :func:`_plain` ``o`` in jax's order (dict keys sorted, None no leaf)."""
+    if o is None:
+        return []
+    if isinstance(o, dict):
+        return [x for k in sorted(o) for x in _leaves(o[k])]
+    if isinstance(o, (list, tuple)):
+        return [x for v in o for x in _leaves(v)]
+    return [o]
+
+
+def sbx_payloads(path: str) -> dict:
+    """The recorded SBX entries of ``path``'s ``data``: ``{entry: record}`` (:class:`_OpaqueUnpickler`)."""
+    data = model_data(path)
+    out = {}
+    for key in SBX_WEIGHT_ENTRIES:
+        val = data.get(key)
+        if isinstance(val, dict) and ":serialized:" in val:
+            try:
+                out[key] = _OpaqueUnpickler(io.BytesIO(base64.b64decode(val[":serialized:"].encode()))).load()
+            except Exception as exc:  # noqa: BLE001 -- a damaged payload fails anywhere in pickle
+                raise RunDirError(f"{path} cannot be loaded (corrupt file? entry {key!r}: {type(exc).__name__})") \
+                    from None
+    return out
+
+
+def _graft(path: str, what: str, fresh, recorded, *, optimizer: bool):
+    """``fresh`` (a flax train state or a key) with the arrays of ``recorded`` (its record) in place of its own."""
+    import jax
+    import jax.numpy as jnp
+
+    def arrays(name, fresh_tree, rec_tree):
+        leaves, treedef = jax.tree_util.tree_flatten(fresh_tree)
+        got = _leaves(_plain(rec_tree))
+        shapes = [np.shape(x) for x in leaves]
+        if len(got) != len(leaves) or any(np.shape(g) != sh for g, sh in zip(got, shapes)):
+            raise RunDirError(f"{path}: the saved {what}.{name} does not fit the run's recipe ({len(got)} arrays, "
+                              f"the model has {len(leaves)})")
+        return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(g, dtype=jnp.asarray(x).dtype)
+                                                      for g, x in zip(got, leaves)])
+
+    if not hasattr(fresh, "replace"):  # a PRNG key
+        return arrays("key", fresh, recorded)
+    state = recorded._state if isinstance(recorded, _Opaque) else None
+    if not isinstance(state, dict):
+        raise RunDirError(f"{path}: the saved {what} is not a train state")
+    fields = [f for f in ("params", "target_params", "batch_stats", "target_batch_stats", "step")
+              if f in state and hasattr(fresh, f)]
+    if optimizer and hasattr(fresh, "opt_state"):
+        fields.append("opt_state")
+    return fresh.replace(**{f: arrays(f, getattr(fresh, f), state[f]) for f in fields})
+
+
+def graft_sbx(model, path: str, payloads: dict, *, optimizer: bool) -> None:
+    """Copy the arrays recorded in ``payloads`` (:func:`sbx_payloads`) into the fresh SBX ``model``: every train
+    state of its policy (``*_state``) and of the model (``ent_coef_state``) and the policy's PRNG keys; ``optimizer``:
+    the optimizer states too (training continues), else only what acting needs."""
+    pol = payloads.get("policy")
+    if not isinstance(pol, _Opaque) or not isinstance(pol._state, dict):
+        raise RunDirError(f"{path}: its 'policy' entry is not an SBX policy")
+    for name, rec in pol._state.items():
+        if (name.endswith("_state") or name in ("key", "noise_key")) and hasattr(model.policy, name):
+            setattr(model.policy, name, _graft(path, f"policy.{name}", getattr(model.policy, name), rec,
+                                               optimizer=optimizer))
+    if "ent_coef_state" in payloads and getattr(model, "ent_coef_state", None) is not None:
+        model.ent_coef_state = _graft(path, "ent_coef_state", model.ent_coef_state, payloads["ent_coef_state"],
+                                      optimizer=optimizer)
+    # the model's own key is PRNGKey(seed) after SBX's load too (set_random_seed); gSDE noise is resampled
+    # from the restored policy key, as SB3's load does after unpickling
+    if getattr(model, "seed", None) is not None and getattr(model, "key", None) is not None:
+        import jax
+
+        model.key = jax.random.PRNGKey(model.seed)  # building the fresh policy drew from it
+    if getattr(model, "use_sde", False):
+        model.policy.reset_noise()
 
 
 def model_data(path: str) -> dict:
@@ -181,8 +335,8 @@ def _policy_kwargs(path: str, saved: dict, rebuilt: dict | None) -> dict:
 def model_custom_objects(path: str, rebuilt: dict, *, library: str) -> dict:
     """``custom_objects`` for SB3's ``load(path)`` covering every cloudpickle payload of ``path``'s ``data``:
     :data:`REBUILT_ENTRIES` from ``rebuilt`` (the recipe's objects; an entry missing there is None, SB3's
-    default), :data:`DATA_ENTRIES` restricted-unpickled; :data:`SBX_WEIGHT_ENTRIES` left to SBX when
-    ``library`` is ``sbx-rl``. Any other payload raises :class:`PickleRefused` naming the file and entry."""
+    default), :data:`DATA_ENTRIES` restricted-unpickled; :data:`SBX_WEIGHT_ENTRIES` None when ``library`` is
+    ``sbx-rl`` (SBX builds them fresh, :func:`graft_sbx` fills them). Any other payload raises :class:`PickleRefused` naming the file and entry."""
     data = model_data(path)
     if not isinstance(data, dict):
         raise RunDirError(f"{path} cannot be loaded (corrupt file? its data is not a JSON object)")
@@ -207,7 +361,7 @@ def model_custom_objects(path: str, rebuilt: dict, *, library: str) -> dict:
                 raise RunDirError(f"{path} cannot be loaded (corrupt file? entry {key!r}: {type(exc).__name__})") \
                     from None
         elif key in SBX_WEIGHT_ENTRIES and library == "sbx-rl":
-            continue
+            custom[key] = None  # SBX builds them fresh; graft_sbx copies the recorded arrays in
         else:
             raise PickleRefused(f"{path} holds a cloudpickled {key!r} ({val.get(':type:', 'object')}), which "
                                 f"dobs-envs does not unpickle (a run directory's model may hold only the run's "

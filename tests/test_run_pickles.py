@@ -145,3 +145,40 @@ def test_replay_buffer_is_read_restricted(tmp_path):
     with pytest.raises(PickleRefused, match="does not unpickle"):  # a buffer is not a normaliser's data
         load_vecnormalize(str(tmp_path / "evil.pkl"))
     assert not marker.exists()
+
+
+def test_sbx_run_loads_without_unpickling_its_networks(tmp_path):
+    """SBX keeps its networks in the cloudpickled ``policy`` entry: their arrays are read as data into a fresh
+    policy (same actions as SBX's own unrestricted load); a payload there runs nothing and is refused."""
+    pytest.importorskip("sbx")
+    from agents.algos import backend_of
+    from agents.loading import load_agent
+
+    out = str(tmp_path / "sac")
+    assert main(["train", "--env", "tracking", "--algo", "sac", "--timesteps", "64", "--out", out, "--no-progress",
+                 "--hyperparams", json.dumps(BUDGETS["tiny"]["hyperparams"]["sac"])]) == 0
+    agent = load_agent(out)
+    assert agent.config["library"] == "sbx-rl"
+    ref = backend_of("sac", "sbx-rl").load(os.path.join(out, "model.zip"), device="cpu")
+    obs = np.random.default_rng(0).normal(size=(8, *agent.observation_space.shape)).astype(np.float32)
+    np.testing.assert_array_equal(agent.model.predict(obs, deterministic=True)[0], ref.predict(obs, deterministic=True)[0])
+    # what train --resume restores (optimizer states too): every array equal to SBX's own load
+    import jax
+
+    from agents.recipes import recipe_from_hyperparams
+    from agents.run_pickles import graft_sbx, model_custom_objects, sbx_payloads
+
+    b, path = backend_of("sac", "sbx-rl"), os.path.join(out, "model.zip")
+    recipe = recipe_from_hyperparams("sac", "tracking", agent.config["hyperparams"])
+    m = b.load(path, device="cpu", custom_objects=model_custom_objects(path, b.rebuilt_objects(recipe), library=b.library))
+    graft_sbx(m, path, sbx_payloads(path), optimizer=True)
+    for mine, theirs in ((m.policy.actor_state, ref.policy.actor_state), (m.policy.qf_state, ref.policy.qf_state),
+                         (m.ent_coef_state, ref.ent_coef_state), (m.policy.key, ref.policy.key), (m.key, ref.key)):
+        a, r = jax.tree_util.tree_leaves(mine), jax.tree_util.tree_leaves(theirs)
+        assert len(a) == len(r) > 0 and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, r))
+    marker = tmp_path / "pwned"
+    _rewrite_data(os.path.join(out, "model.zip"),
+                  lambda data: data["policy"].update({":serialized:": _payload(_Touch(marker))}))
+    with pytest.raises(ValueError, match="'policy' entry is not an SBX policy"):
+        load_agent(out)
+    assert not marker.exists()
