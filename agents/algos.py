@@ -247,7 +247,7 @@ class AlgoBackend:
         for key in SCHEDULE_KEYS:
             if key in algo_kw:
                 algo_kw[key] = schedule(algo_kw[key])
-        if recipe.action_noise_sigma is not None:
+        if recipe.action_noise_sigma is not None and venv is not None:  # None: loading for evaluation
             algo_kw["action_noise"] = make_action_noise(recipe.action_noise_type or "normal",
                                                         recipe.action_noise_sigma, venv, seed)
         return algo_kw
@@ -260,14 +260,42 @@ class AlgoBackend:
 
     def load(self, path: str, *, device: str = "cpu", **kwargs):
         """The model saved in ``path``; ``kwargs`` as for SB3's ``load`` (``env`` to continue training on,
-        ``custom_objects`` from :meth:`custom_objects`, attributes such as ``verbose``)."""
+        ``custom_objects`` (:meth:`load_run_model` gives them), attributes such as ``verbose``)."""
         return self.load_class().load(path, device=device, **kwargs)
 
-    def custom_objects(self, recipe: Recipe, venv) -> dict:
-        """The saved attributes :meth:`load` must rebuild from ``recipe`` when training continues: the
-        schedules (saved as closures, not unpickled)."""
+    def rebuilt_objects(self, recipe: Recipe, venv=None) -> dict:
+        """The attributes of a saved model that JSON cannot hold, rebuilt from ``recipe`` (its run's
+        ``config.json``) instead of unpickled from ``model.zip`` (:func:`agents.run_pickles.model_custom_objects`):
+        the policy class of ``recipe.policy``, ``policy_kwargs``, the schedules, the recipe's buffer classes and
+        action noise (on ``venv``; None without one: evaluation draws no noise). ``lr_schedule`` is None: SB3
+        derives it from ``learning_rate`` when the model is set up."""
         kw = self.constructor_kwargs(recipe, venv)
-        return {k: kw[k] for k in SCHEDULE_KEYS if k in kw}
+        cls = self.load_class()
+        policy = cls.policy_aliases.get(recipe.policy) if isinstance(recipe.policy, str) else None
+        if policy is None:
+            raise ValueError(f"{self.class_name} has no policy {recipe.policy!r} (it has {sorted(cls.policy_aliases)})")
+        import inspect
+
+        defaults = {k: p.default for k, p in inspect.signature(cls.__init__).parameters.items()
+                    if p.default is not inspect.Parameter.empty}  # what SB3 saved when the recipe gave none
+        keys = ("policy_kwargs", "learning_rate", "clip_range", "clip_range_vf", "rollout_buffer_class",
+                "rollout_buffer_kwargs", "replay_buffer_class", "replay_buffer_kwargs", "action_noise")
+        return {"policy_class": policy, "lr_schedule": None, **{k: kw[k] if k in kw else defaults.get(k) for k in keys}}
+
+    def load_run_model(self, path: str, recipe: Recipe, *, venv=None, device: str = "cpu", **kwargs):
+        """The model saved in ``path`` by a run of ``recipe``, nothing unpickled but plain data
+        (:func:`agents.run_pickles.model_custom_objects`; raises :class:`agents.run_pickles.PickleRefused` for a
+        payload it does not rebuild); ``venv``, ``kwargs`` as for :meth:`load`."""
+        from .run_pickles import graft_sbx, model_custom_objects, sbx_payloads
+
+        custom = model_custom_objects(path, self.rebuilt_objects(recipe, venv), library=self.library)
+        payloads = sbx_payloads(path) if self.library == "sbx-rl" else {}  # read before anything is built
+        if venv is not None:
+            kwargs["env"] = venv
+        model = self.load(path, device=device, custom_objects=custom, **kwargs)
+        if payloads:
+            graft_sbx(model, path, payloads, optimizer=venv is not None)
+        return model
 
     def save(self, model, path: str) -> None:
         """Save ``model`` to exactly ``path`` (give it a suffix: SB3 appends ``.zip`` to a path without one)."""

@@ -9,6 +9,8 @@ import sys
 import time
 from collections import Counter
 
+from dobs_envs.paths import OutputPathError, check_output_dir, check_output_file
+
 from .bench_exec import BACKENDS
 from .bench_plan import AGENTS, BUDGETS
 from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
@@ -48,7 +50,8 @@ def add_parser(sub) -> None:
                    help="continue the interrupted run in DIR from its last save (model.zip after Ctrl-C, else the "
                         "last checkpoint) with the run's own configuration")
     p.add_argument("--allow-custom-env", action="store_true",
-                   help="accept --env 'package.module:factory' (imports that code)")
+                   help="accept --env 'package.module:factory' (imports that module and calls the factory; with "
+                        "--resume: the run's config.json may name one)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--verbose", type=int, default=0)
     p.set_defaults(func=_train)
@@ -63,8 +66,9 @@ def add_parser(sub) -> None:
     p.add_argument("--json", default=None, help="also write the summary to this file (a new file; see --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--allow-custom-env", action="store_true",
-                   help="accept a run whose config.json names 'package.module:factory' (imports that code; "
-                        "model.zip and vecnormalize.pkl are pickles: load only runs you trust)")
+                   help="accept a run whose config.json names 'package.module:factory' (imports that module and "
+                        "calls the factory: only that; the run's pickles never run code either way: model.zip and "
+                        "vecnormalize.pkl are read as data against an allow-list of what a run holds)")
     p.set_defaults(func=_evaluate)
 
     p = sub.add_parser("benchmark", help="RL and hybrid agents (several training seeds) vs the paper's controller, "
@@ -149,6 +153,16 @@ def _usage_error(msg: str) -> None:
     """One line on stderr, exit status 2 (argparse's convention for usage errors)."""
     print(f"dobs-envs: error: {msg}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def _check_out_dir(path: str | None, option: str) -> None:
+    """Usage error when the output directory ``path`` (None: not given) cannot be made
+    (:func:`dobs_envs.paths.check_output_dir`: a regular file in the way)."""
+    if path is not None:
+        try:
+            check_output_dir(path, option)
+        except OutputPathError as exc:
+            _usage_error(str(exc))
 
 
 def _json_object(text: str) -> dict:
@@ -250,8 +264,8 @@ def _train(args) -> int:
         except HyperparamsError as exc:
             _usage_error(f"--recipe: {exc}")
     out = args.out or default_run_dir(env, args.algo, args.multi_agent, args.seed)
-    if os.path.exists(out) and not os.path.isdir(out):
-        _usage_error(f"--out {out!r} is a file, not a directory")
+    _check_out_dir(out, "--out")
+    _check_out_dir(args.tensorboard, "--tensorboard")
     if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
         _usage_error(_occupied_run_dir(out))
     try:
@@ -310,6 +324,7 @@ def _resume(args) -> int:
         _usage_error("--resume continues a run with its own recipe (config.json); --recipe starts a new run")
     if args.out is not None and os.path.abspath(args.out) != os.path.abspath(run):
         _usage_error(f"--out {args.out!r} differs from --resume {run!r} (a resumed run stays in its directory)")
+    _check_out_dir(args.tensorboard, "--tensorboard")
     try:
         cfg = read_run_config(run, require_model=False)
         resume_point(run, cfg)
@@ -349,13 +364,10 @@ def _evaluate(args) -> int:
     from .runs import RunDirError
 
     if args.json:
-        d = os.path.dirname(os.path.abspath(args.json))
-        if os.path.isdir(args.json):
-            _usage_error(f"--json {args.json!r} is a directory; give a file name, e.g. {os.path.join(args.json, 'eval.json')}")
-        if not os.path.isdir(d):
-            _usage_error(f"--json {args.json!r}: directory {d!r} does not exist")
-        if os.path.exists(args.json) and not args.overwrite:
-            _usage_error(f"--json {args.json!r} already exists; pass --overwrite to replace it, or choose another file")
+        try:
+            check_output_file(args.json, "--json", overwrite=args.overwrite, example="eval.json")
+        except OutputPathError as exc:
+            _usage_error(str(exc))
     try:
         summ = evaluate_model(args.model, args.episodes, args.seed, allow_custom_env=args.allow_custom_env)
     except (RunDirError, EnvNameError) as exc:
@@ -415,8 +427,7 @@ def _benchmark(args) -> int:
         if name not in trained:
             _usage_error(f"--agent-seeds names {name!r}, which this benchmark does not train; its agents: "
                          f"{','.join(trained)}")
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        _usage_error(f"--out {args.out!r} is a file, not a directory")
+    _check_out_dir(args.out, "--out")
     if args.address is not None and args.backend != "ray":
         _usage_error(f"--address names a Ray cluster: it needs --backend ray (got --backend {args.backend})")
     if args.address is not None and not args.address.strip():
@@ -521,6 +532,7 @@ def _tune(args) -> int:
 
     if args.resume and args.overwrite:
         _usage_error("--resume continues a study, --overwrite replaces it: give one of them")
+    _check_out_dir(args.out, "--out")
     if args.address is not None and args.cpus is not None:
         _usage_error("--cpus sizes a local Ray; with --address the cluster's CPUs are used")
     given = {dest: getattr(args, dest) for dest in _TUNE_OPTIONS if getattr(args, dest) is not None}

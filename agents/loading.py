@@ -4,17 +4,19 @@ or one of its checkpoints) into a :class:`TrainedAgent`, which acts on the task'
 Observations are normalised with the statistics saved with the model (``vecnormalize.pkl``); a
 multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEncoder` (the padding and
 one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
-loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`). ``model.zip`` and ``vecnormalize.pkl`` are
-pickles: load runs only from trusted sources.
+loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`).
+``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`:
+a refused class raises :class:`agents.run_pickles.PickleRefused`, a :class:`RunDirError`; SBX networks are
+read as arrays into a fresh policy).
 """
 from __future__ import annotations
 
-import pickle
 from typing import Callable
 
 import numpy as np
 
 from .algos import BackendUnavailable, backend_of
+from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
 from .vec_env import SlotEncoder
 
@@ -56,17 +58,13 @@ class TrainedAgent:
             algo_backend = backend_of(self.algo, self.config.get("library"))
         except BackendUnavailable as exc:
             raise RunDirError(f"{files.run_dir!r}: {exc}") from None
-        self.model = load_or_refuse(files.model, lambda: algo_backend.load(files.model, device=device))
+        # the pickles first, checked without running code from them (agents.run_pickles), then the model
         vn = files.vecnormalize
-        self.vecnorm = None
-        if vn is not None:
-            def unpickle():
-                with open(vn, "rb") as fh:
-                    return pickle.load(fh)  # VecNormalize without its venv: only obs_rms is used
-
-            self.vecnorm = load_or_refuse(vn, unpickle)
-            if not hasattr(self.vecnorm, "normalize_obs"):
-                raise RunDirError(f"{vn} holds a {type(self.vecnorm).__name__}, not the run's VecNormalize")
+        self.vecnorm = None if vn is None else load_vecnormalize(vn)  # without its venv: only obs_rms is used
+        recipe = _run_recipe(files)
+        self.model = load_or_refuse(files.model, lambda: algo_backend.load_run_model(files.model, recipe,
+                                                                                    device=device))
+        if self.vecnorm is not None:
             self.vecnorm.training = False
             self.vecnorm.norm_reward = False
 
@@ -143,6 +141,19 @@ class TrainedAgent:
             return {a: act for a, act in enc.decode_all(acts).items() if a in observations}
 
         return policy
+
+
+def _run_recipe(files):
+    """The :class:`agents.recipes.Recipe` of a run (its ``config.json``): what the model's rebuilt objects
+    come from."""
+    from .recipes import recipe_from_hyperparams
+
+    cfg = files.config
+    try:
+        return recipe_from_hyperparams(cfg["algo"], str(cfg["env"]), dict(cfg.get("hyperparams") or {}),
+                                       multi_agent=bool(cfg["multi_agent"]), hybrid=cfg.get("hybrid"))
+    except (TypeError, ValueError) as exc:
+        raise RunDirError(f"{files.run_dir}/config.json: its hyperparams are not a recipe ({exc})") from None
 
 
 def load_agent(path: str, device: str = "cpu") -> TrainedAgent:

@@ -83,6 +83,8 @@ def load_or_refuse(path: str, load: Callable):
     """``load()``, or a :class:`RunDirError` naming ``path`` when the file cannot be read (corrupt, truncated)."""
     try:
         return load()
+    except RunDirError:  # already one line naming the file (e.g. agents.run_pickles.PickleRefused)
+        raise
     except Exception as exc:  # noqa: BLE001 -- a damaged zip/pickle fails anywhere in zipfile/torch/pickle
         raise RunDirError(f"{path} cannot be loaded (corrupt or truncated file? {type(exc).__name__}: "
                           f"{_first_line(exc)})") from exc

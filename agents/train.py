@@ -341,9 +341,8 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     uninterrupted run. An off-policy run resumed from a checkpoint starts with an empty replay
     buffer. Interrupting again works as in :func:`train`.
     """
-    from stable_baselines3.common.vec_env import VecNormalize
-
     from .config import check_env_name
+    from .run_pickles import load_replay_buffer, load_vecnormalize
 
     cfg = read_run_config(path, require_model=False)
     point = resume_point(path, cfg)
@@ -362,15 +361,14 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
                timesteps=int(cfg["timesteps"]), seed=seed, env_kwargs=cfg.get("env_kwargs"),
                checkpoint_freq=int(cfg.get("checkpoint_freq", int(cfg["timesteps"]) // 4)))
     venv = s.venv
-    if point.vecnormalize is not None:
-        venv = load_or_refuse(point.vecnormalize, lambda: VecNormalize.load(point.vecnormalize, venv.venv))
-    custom = algo_backend.custom_objects(recipe, venv)  # rebuilt, not unpickled closures
-    model = load_or_refuse(point.model, lambda: algo_backend.load(
-        point.model, env=venv, device="auto", custom_objects=custom, tensorboard_log=tensorboard, verbose=verbose))
+    if point.vecnormalize is not None:  # nothing but the normaliser's own data unpickled (agents.run_pickles)
+        venv = load_vecnormalize(point.vecnormalize, venv.venv)
+    model = load_or_refuse(point.model, lambda: algo_backend.load_run_model(  # rebuilt objects, not unpickled ones
+        point.model, recipe, venv=venv, device="auto", tensorboard_log=tensorboard, verbose=verbose))
     model.num_timesteps = point.sb3_timesteps
     model.set_random_seed(seed)
     if point.replay_buffer is not None:
-        load_or_refuse(point.replay_buffer, lambda: model.load_replay_buffer(point.replay_buffer))
+        load_or_refuse(point.replay_buffer, lambda: load_replay_buffer(model, point.replay_buffer))
     config = dict(cfg)
     config.setdefault("checkpoint_freq", s.config["checkpoint_freq"])
     config["resumes"] = list(cfg.get("resumes", [])) + [{"from": os.path.relpath(point.model, path),

@@ -11,6 +11,7 @@ import json
 import os
 import numpy as np
 
+from .paths import OutputPathError, check_output_dir
 from .rollout import Trajectory, rollout, rollout_reference, window_stats
 from .scenarios.paper import PAPER_SCENARIOS
 
@@ -193,8 +194,10 @@ def add_parser(sub) -> None:
 
 def _check_out(args) -> None:
     """Usage error (exit 2) when ``--out`` is a file or already holds this command's results."""
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        args.parser.error(f"--out {args.out!r} is a file, not a directory")
+    try:
+        check_output_dir(args.out, "--out")
+    except OutputPathError as exc:
+        args.parser.error(str(exc))
     if args.scenario in STUDIES:
         targets = [os.path.join(args.out, f"{args.scenario}.json")]
     else:

@@ -15,17 +15,27 @@ bound. The kernels now shorten an Euler step whose stability test fails
 - the split steps keep batch independence (tiles, the run-time-width tile, copy by copy, threads:
   bit for bit) and match the numpy reference;
 - a finite plant beyond the bound is ``state_bound_exceeded`` even when another quantity is not
-  finite in the same step (both kernels).
+  finite in the same step (both kernels);
+- the bound's promise over its whole range (issue 41): ``state_bound`` is at most the system's limit
+  (:func:`dobs_envs.envs.options.state_bound_limit`, computed from the matrices, ``dt`` and the action
+  bounds; a larger one raises ``StateBoundError``), and every env built with ``state_bound`` at its limit
+  (registered envs, ``random_network`` with other parameters, a scenario file) stays finite from states
+  of any direction up to the limit under extreme inputs. Measured before the limit existed (state_bound
+  1e30, 14 directions x zero / bang-bang inputs, 5 control steps; smallest initial norm that reached
+  ``non_finite_state``, grid factor 1.33): disturbance_rejection 4.2e5 (limit 5.5e4), tracking and
+  tracking_lossy 1.8e6 (2.7e5), random_network 1.8e6 (2.3e5), hetero_mas 1.3e9 (3.4e5).
 """
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dobs_envs import disturbance_rejection_v0, hetero_mas_v0, random_network_v0, tracking_v0
-from dobs_envs.envs import REASONS, DisturbanceRejectionEnv, TrackingEnv
+from dobs_envs import disturbance_rejection_v0, hetero_mas_v0, random_network_v0, tracking_lossy_v0, tracking_v0
+from dobs_envs.envs import REASONS, DisturbanceRejectionEnv, TrackingEnv, make_parallel_env
+from dobs_envs.envs.options import StateBoundError
 from dobs_envs.envs.numpy_advance import advance_reference
 from dobs_envs.envs.step_kernel import advance_batch
+from dobs_envs.scenarios.io import example_path
 from dobs_envs.scenarios.paper import ne3
 from dobs_envs.sim.period_kernel import MIN_TILE, TILE
 
@@ -65,9 +75,9 @@ def _finite_infos(infos):
     return all(np.all(np.isfinite(np.asarray(v, dtype=float))) for i in infos.values() for v in i.values())
 
 
-def _run(name, x0, mode, seed, steps=STEPS):
+def _run(name, x0, mode, seed, steps=STEPS, env=None):
     """One episode from ``x0``; checks every step; returns the termination reason code (0 if none)."""
-    env = _env(name, steps)
+    env = _env(name, steps) if env is None else env
     bound = env.core.state_bound
     obs, infos = env.reset(seed=seed, options={"x0": x0})
     rng = np.random.default_rng(seed)
@@ -116,6 +126,80 @@ def test_states_beyond_the_bound_end_as_state_bound_exceeded(name, raw, factor, 
     # _run checks the reason: state_bound_exceeded once ||x|| > state_bound after a step (a stable
     # direction may bring the plant back inside the bound: then the episode goes on, finite)
     _run(name, factor * bound * _direction(raw, n), mode, seed, steps=3)
+
+
+#: envs checked at their state bound limit: the registered ones, random_network with other parameters
+#: (denser graph, more states and agents) and a scenario file (the custom3 example)
+LIMIT_ENVS = {
+    **{name: (mod.parallel_env, {}) for name, mod in MODULES.items()},
+    "tracking_lossy": (tracking_lossy_v0.parallel_env, {}),
+    "random_network_dense": (random_network_v0.parallel_env,
+                             {"n_states": 8, "n_observers": 5, "edge_prob": 0.8, "system_seed": 3}),
+    "custom3_file": (lambda **kw: make_parallel_env(example_path("custom3"), **kw), {}),
+}
+#: control steps per example: the gains peak within the first control steps from a large state (the
+#: faulted step and custom3 integrate the whole range by the shortest split steps: fewer, for test time)
+LIMIT_STEPS = {"tracking_lossy": 2, "custom3_file": 3}
+
+
+def _limit_env(name):
+    """``name``'s env with ``state_bound`` at its limit (the limit of the same options: ``max_cycles`` enters
+    the calibrated action bound, and through it the limit)."""
+    if (name, "limit") not in _ENVS:
+        make, kw = LIMIT_ENVS[name]
+        kw = dict(kw, max_cycles=LIMIT_STEPS.get(name, 8))
+        _ENVS[name, "limit"] = make(state_bound=make(**kw).core.state_bound_limit, **kw)
+    return _ENVS[name, "limit"]
+
+
+@pytest.mark.parametrize("name", sorted(LIMIT_ENVS))
+@settings(max_examples=4, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(raw=_direction_st, frac=st.floats(0.0, 1.0), mode=st.sampled_from(["bang", "uniform"]), seed=st.integers(0, 2**16))
+def test_states_up_to_the_limit_stay_finite(name, raw, frac, mode, seed):
+    """The promise over its whole range: ``state_bound`` at the system's limit, any state inside it."""
+    env = _limit_env(name)
+    core = env.core
+    assert core.state_bound == core.state_bound_limit > 1e3  # the default bound is well inside every limit
+    _run(name, frac * core.state_bound * _direction(raw, core.n_states), mode, seed,
+         steps=LIMIT_STEPS.get(name, 8), env=env)
+
+
+@pytest.mark.parametrize("name", sorted(LIMIT_ENVS))
+def test_worst_states_at_the_limit_stay_finite(name):
+    """The edge of the range: norm = the limit along every coordinate axis and the all-ones direction,
+    bang-bang inputs (all copies of one batched core: one compiled call per step)."""
+    env = _limit_env(name)
+    core = env.core
+    n, S = core.n_states, core.state_bound
+    dirs = np.vstack([np.eye(n), np.ones((1, n)) / np.sqrt(n), -np.ones((1, n)) / np.sqrt(n)])
+    from dobs_envs.envs.env_core import EnvCore
+
+    batch = EnvCore(core.scenario, core.options, len(dirs), default_action_bound=core.action_bound)
+    batch.reset(np.arange(len(dirs)), list(range(len(dirs))), {"x0": S * dirs})
+    rng = np.random.default_rng(0)
+    for _ in range(LIMIT_STEPS.get(name, 8)):
+        u = np.where(rng.random((len(dirs), core.n_inputs)) < 0.5, -1.0, 1.0) * np.asarray(batch.action_bound)
+        r = batch.advance(u)
+        assert not np.any(np.asarray(r.reason) == 2), np.asarray(r.reason)
+        s = batch.sim_state
+        for f in ("x", "z", "gamma", "gamma_s", "v", "x_r"):
+            assert np.all(np.isfinite(getattr(s, f))), f
+
+
+def test_state_bound_above_the_limit_is_refused():
+    """The issue's state: disturbance_rejection with state_bound=1e20 reached NaN in one step from 1e6 per
+    component; a bound above the system's limit is now a named error (the option, the env, the limit)."""
+    for make, kw in (LIMIT_ENVS["disturbance_rejection"], LIMIT_ENVS["random_network_dense"],
+                     LIMIT_ENVS["custom3_file"]):
+        limit = make(**kw).core.state_bound_limit
+        assert make(state_bound=limit, **kw).core.state_bound == limit
+        with pytest.raises(StateBoundError, match=r"state_bound=.* exceeds the limit .* of "):
+            make(state_bound=limit * 1.001, **kw)
+    with pytest.raises(StateBoundError, match=r"state_bound=1e\+20 exceeds the limit 5\.46.e\+04 of DisturbanceRejectionEnv"):
+        disturbance_rejection_v0.parallel_env(state_bound=1e20)
+    with pytest.raises(StateBoundError, match="action_bound too large"):
+        tracking_v0.parallel_env(action_bound=1e30)
 
 
 def test_the_issue_states():

@@ -68,7 +68,7 @@ from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
 from .features import pack_static, write_features
 from .observation import FeatureLayout, resolve_components
-from .options import EnvOptions
+from .options import EnvOptions, check_state_bound, state_bound_limit
 from ..sim.period_kernel import TILE
 from .fault_step_kernel import advance_batch_faulted, advance_range_faulted, fault_features
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
@@ -134,6 +134,8 @@ class EnvCore:
     threads : threads advancing disjoint ranges of at least :data:`~dobs_envs.sim.period_kernel.TILE` copies
         concurrently (the compiled step releases the GIL); None: one per CPU core, 1: serial.
         Results do not depend on it (every copy's arithmetic is independent of the chunking).
+    env_name : the environment named in errors (a :class:`~dobs_envs.envs.options.StateBoundError` when
+        ``options.state_bound`` exceeds :attr:`state_bound_limit`); default: the scenario's name
 
     Raises the design layer's :class:`~dobs_envs.assumptions.AssumptionError` when the
     system does not satisfy the paper's assumptions, ``ValueError`` naming the option
@@ -141,7 +143,8 @@ class EnvCore:
     """
 
     def __init__(self, scenario, options: EnvOptions, num_envs: int = 1, *, default_action_bound=None,
-                 task_error: Callable | None = None, task_error_key: str | None = None, threads: int | None = 1):
+                 task_error: Callable | None = None, task_error_key: str | None = None, threads: int | None = 1,
+                 env_name: str | None = None):
         from ..scenarios.scenario import Scenario
 
         sc = resolve_scenario(scenario)
@@ -214,6 +217,9 @@ class EnvCore:
             raise ValueError(f"action_bound must be a positive finite scalar or have shape ({m},) (one per input "
                              f"component), got {o.action_bound!r}")
         self.action_bound = _ro(bound)
+        #: the largest state_bound with a finite simulation shown for these inputs (options.state_bound_limit)
+        self.state_bound_limit = state_bound_limit(p, sc.gamma0, bound)
+        check_state_bound(o.state_bound, self.state_bound_limit, env_name or f"scenario {sc.name!r}")
         #: option normalized_actions: agents act in [-1, 1]^M (M = max channel width, extra entries ignored)
         self.normalized_actions = o.normalized_actions
         M = int(self.action_widths.max())

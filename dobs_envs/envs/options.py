@@ -25,7 +25,8 @@ from ..linalg.validation import NUMERIC_KINDS, as_flag, as_float, as_int, check_
 from ..scenarios.random import GRAPH_TOPOLOGIES, MAX_SIZE
 from ..sim.faults import Faults
 
-__all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES"]
+__all__ = ["EnvOptions", "HeteroMASOptions", "RandomNetworkOptions", "REWARDS", "DISTURBANCES", "RENDER_MODES",
+           "StateBoundError", "state_bound_limit", "check_state_bound"]
 
 #: reward shapes of the ``reward`` option
 REWARDS = ("quadratic", "log", "sqrt")
@@ -33,6 +34,86 @@ REWARDS = ("quadratic", "log", "sqrt")
 DISTURBANCES = ("exosystem", "random", "none")
 #: render modes of every environment ("human": a live matplotlib window, see dobs_envs.envs.rendering)
 RENDER_MODES = ("human", "rgb_array")
+
+class StateBoundError(ValueError):
+    """``state_bound`` above the largest bound for which the simulation of the system is shown finite
+    (:func:`state_bound_limit`); the message names the option, the environment and the limit."""
+
+
+def state_bound_limit(params, gamma0: float, action_bound) -> float:
+    """The largest ``state_bound`` for which the environment promises a finite simulation from every state
+    inside it, with any inputs inside the action bounds (tested in ``tests/test_bounded_states.py`` up to
+    this limit, worst-case directions and extreme actions). Computed from the system (``params``: the
+    :class:`~dobs_envs.sim.state.SimParams` of the core; ``gamma0``: the observers' initial gain;
+    ``action_bound``: the ``(m,)`` input bounds).
+
+    The integration fails only when an Euler step must be shorter than ``h_min = dt / MAX_SPLIT`` to stay
+    monotone (:mod:`dobs_envs.sim.period_kernel`, "Stable steps": ``2 deg_i h (gamma_i + h phi_i
+    ||eps_iu||^2) <= 1``), i.e. once a gain exceeds ``1 / (2 deg_i h_min)``. In the consensus coordinates the
+    error decays at least at rate ``c gamma`` while the gain grows by ``phi ||eps||^2`` (eq. (gammaiis)), so
+    ``gamma^2 + (phi / c) ||eps||^2`` does not grow and the gain peaks below ``sqrt(gamma0^2 + (phi / c)
+    E^2)`` for an error ``E``; ``c`` is the smallest positive eigenvalue of ``T_u^T (L x I_n) T_u`` (eq.
+    (dotepsu)) and ``||eps_iu|| <= 2 deg_i ||x||``. Inside a control period of length ``T`` the plant grows
+    by at most ``exp(||A||_2 T)``, plus ``T ||B||_2 ||u||`` from the inputs, before the bound is checked. Hence
+
+        ``E = min_i sqrt((1 / (2 deg_i h_min))^2 - gamma0^2) sqrt(c / phi_i) / (2 deg_i)``,
+        ``limit = E / exp(||A||_2 T) - T ||B||_2 ||action_bound||_2``
+
+    (at most 0 when no state bound is safe, e.g. inputs of 1e30; inf for a system without consensus terms). The argument neglects the coupling through ``Ebar`` and the
+    plant, which is why the property test checks the whole range; the registered environments reached
+    ``non_finite_state`` from 6.5 (tracking) to 4000 (hetero_mas) times their limit (measured thresholds in
+    ``tests/test_bounded_states.py``'s module doc)."""
+    from ..sim.period_kernel import MAX_SPLIT
+
+    N, n = params.n_nodes, params.n_states
+    lap = np.zeros((N, N))
+    for i in range(N):
+        for j, w in zip(params.nbr_idx[i], params.nbr_w[i]):
+            if w != 0.0:
+                lap[i, j] -= w
+                lap[i, i] += w
+    bases = []
+    for i in range(N):  # an orthonormal basis of Im T_iu = Im P_u,i
+        w, V = np.linalg.eigh(0.5 * (params.P_u[i] + params.P_u[i].T))
+        bases.append(V[:, w > 0.5])
+    r = [b.shape[1] for b in bases]
+    Tu = np.zeros((N * n, sum(r)))
+    for i, b in enumerate(bases):
+        Tu[i * n:(i + 1) * n, sum(r[:i]):sum(r[:i + 1])] = b
+    ev = np.linalg.eigvalsh(Tu.T @ np.kron(lap, np.eye(n)) @ Tu) if Tu.size else np.zeros(0)
+    tol = max(ev.max(initial=0.0), 1.0) * 1e-9
+    pos = ev[ev > tol]
+    deg, phi = np.asarray(params.degree, dtype=float), np.asarray(params.phi, dtype=float)
+    h_min = params.dt / MAX_SPLIT
+    growth = float(np.exp(np.linalg.norm(params.A, 2) * params.dt * params.substeps))
+    limits = []
+    for i in range(N):
+        if deg[i] <= 0.0:
+            continue  # a node without neighbours has no consensus term: no step test
+        g_max = 1.0 / (2.0 * deg[i] * h_min)
+        if phi[i] <= 0.0 or pos.size == 0:
+            limits.append(np.inf if g_max > gamma0 else 0.0)
+            continue
+        head = np.sqrt(max(g_max ** 2 - float(gamma0) ** 2, 0.0))
+        limits.append(head * np.sqrt(pos.min() / phi[i]) / (2.0 * deg[i]))
+    E = float(min(limits, default=np.inf))
+    u = float(np.linalg.norm(np.asarray(action_bound, dtype=float)))
+    return E / growth - params.dt * params.substeps * float(np.linalg.norm(params.B, 2)) * u
+
+
+def check_state_bound(state_bound: float, limit: float, env: str) -> None:
+    """:class:`StateBoundError` when ``state_bound`` exceeds ``limit`` (:func:`state_bound_limit`) for ``env``
+    (an environment class's name, or ``scenario '<name>'``)."""
+    if state_bound > limit:
+        if limit <= 0:
+            raise StateBoundError(f"state_bound={state_bound:g}: no state bound of {env} is shown to keep its "
+                                  f"simulation finite with inputs this large (action_bound too large: limit "
+                                  f"{limit:.4g}, dobs_envs.envs.options.state_bound_limit); give a smaller "
+                                  f"action_bound")
+        raise StateBoundError(f"state_bound={state_bound:g} exceeds the limit {limit:.4g} of {env} (the largest bound "
+                              f"from which its simulation is shown finite with its action_bound: "
+                              f"dobs_envs.envs.options.state_bound_limit); give state_bound <= {limit:.4g}")
+
 
 @dataclass(frozen=True, eq=False)
 class EnvOptions:
@@ -65,7 +146,8 @@ class EnvOptions:
         Half-width of the uniform noise added to ``x0`` at reset (``None``: the
         scenario's ``x0_scale`` distribution if it has one, else 1.0).
     state_bound : float
-        Termination when ``||x|| > state_bound`` (at most 1e150).
+        Termination when ``||x|| > state_bound``; at most the system's limit (:func:`state_bound_limit`,
+        checked by the core: :class:`StateBoundError`), below which the simulation is finite.
     termination_penalty : bool
         Charge the cost of the bound for the rest of the horizon on termination.
     reward : str

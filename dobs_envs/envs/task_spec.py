@@ -71,5 +71,5 @@ class TaskSpec:
         cls._check_scenario(sc, opts, given)
         fn, key = cls._task_error(sc, opts)
         return EnvCore(sc, opts, num_envs, default_action_bound=cls._default_action_bound(sc, opts, given),
-                       task_error=fn, task_error_key=key, threads=threads)
+                       task_error=fn, task_error_key=key, threads=threads, env_name=cls.__name__)
 

@@ -88,10 +88,13 @@ class TrackingEnv(DObsParallelEnv):
     (``x``, ``x_r``, the observer states ``z``, ``gamma``, ``gamma_s``, ``v``) is
     not finite (``info[agent]["termination_reason"]`` = 1 ``state_bound_exceeded`` /
     2 ``non_finite_state``; a finite ``x`` beyond the bound is always reason 1). The
-    simulation stays finite from every state inside the bound (and beyond it: Euler steps
-    are shortened where the adaptive gains would make them unstable,
-    :mod:`dobs_envs.sim.period_kernel` "Stable steps"), so reason 2 means the state was already
-    non-finite or absurdly large (e.g. ``state_bound=1e150`` with inputs of 1e30). The terminal step's observations and ``state()`` are
+    simulation stays finite from every state inside the bound with any inputs inside the
+    action bound: ``state_bound`` may not exceed the system's limit (``core.state_bound_limit``,
+    computed from the system, ``dt`` and the action bound by
+    :func:`dobs_envs.envs.options.state_bound_limit`; about 2.7e5 here, a larger bound raises
+    ``StateBoundError``), and Euler steps are shortened where the adaptive gains would make them
+    unstable (:mod:`dobs_envs.sim.period_kernel` "Stable steps"), so reason 2 means the state was
+    already non-finite or absurdly large (e.g. an ``x0`` of 1e308). The terminal step's observations and ``state()`` are
     cleaned (NaN -> 0, +-inf -> +-largest finite value of ``obs_dtype``), a non-finite
     step cost is replaced by the cost of one step on the bound, and ``info`` keeps the
     raw diagnostics (errors and gains may be NaN/inf).
