@@ -1,9 +1,11 @@
 """Two checkouts side by side: bit-for-bit outputs and speed (single env, vector env B = 1024).
 
-Usage: python benchmarks/compare_checkouts.py [--base /work/main] [--head .] [--digest] [--speed]
+Usage: python benchmarks/compare_checkouts.py [--base REF|PATH] [--head REF|PATH] [--digest] [--speed]
        [--repeats 7] [--seconds 0.4] [--batch 1024] [--env-id dobs_envs/Tracking-v0]
 
-Each checkout runs in its own worker process (that checkout first on ``sys.path``, its own
+``--base`` (default: the branch ``main``) and ``--head`` (default: this checkout) are each a directory or a
+git ref of this repository, checked out in a temporary ``git worktree`` for the run and removed afterwards
+(``benchmarks/checkouts.py``). Each checkout runs in its own worker process (that checkout first on ``sys.path``, its own
 numba cache directory under the temp dir, nothing written into the checkouts), so both sides
 are measured the same way:
 
@@ -29,11 +31,15 @@ are measured the same way:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
 import sys
 import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from checkouts import REPO, add_base_argument, checkout  # noqa: E402
 
 WORKER = r'''
 import hashlib, json, sys, time
@@ -293,9 +299,9 @@ class Worker:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", default="/work/main", help="reference checkout (default: today's main)")
-    ap.add_argument("--head", default=os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                    help="checkout compared with it (default: this one)")
+    add_base_argument(ap, what="reference checkout")
+    ap.add_argument("--head", default=REPO, metavar="REF|PATH",
+                    help="checkout compared with it, a directory or a git ref (default: this checkout)")
     ap.add_argument("--digest", action="store_true", help="compare the outputs bit for bit")
     ap.add_argument("--speed", action="store_true", help="compare the speed (the default without --digest)")
     ap.add_argument("--repeats", type=int, default=7)
@@ -307,7 +313,16 @@ def main(argv=None):
                          "machine, not the time the worker waits for a core; single-threaded runs only)")
     args = ap.parse_args(argv)
     speed = args.speed or not args.digest
-    workers = {"base": Worker(args.base), "head": Worker(args.head)}
+    with contextlib.ExitStack() as stack:
+        try:
+            paths = {k: stack.enter_context(checkout(getattr(args, k))) for k in ("base", "head")}
+        except ValueError as exc:
+            ap.error(str(exc))
+        return _compare(args, speed, paths)
+
+
+def _compare(args, speed, paths):
+    workers = {k: Worker(path) for k, path in paths.items()}
     for k, w in workers.items():
         print(f"{k}: {w.file}")
     status = 0
