@@ -222,6 +222,7 @@ def advance_range(lo, hi, u, args, fault):
     else:
         ef = env_fault(fault)
         noisy = ef.args.noise_std > 0.0
+        noise_a = ef.state.noise
         delivered = np.empty((x.shape[0], ef.args.sender.shape[0]), dtype=np.bool_)  # the period's (not observed)
         advance_rows(pa, ka, lo, hi, FaultPeriod(ef.args, ef.state, delivered))
     # 4-5: features, reward, termination
@@ -246,7 +247,7 @@ def advance_range(lo, hi, u, args, fault):
                 t[b] = t[b] + c.period
                 cycles[b] += 1
                 if noisy:
-                    cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, ef.state.noise)
+                    cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, noise_a)
                 else:
                     cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, None)
                 cost[b] = cb

@@ -13,8 +13,8 @@ and runs no fault code. The two specialisations differ where the numpy reference
 (``_IdealExchange`` / ``_FaultedExchange``) do: the degrees of the stable-step test (the active graph's),
 the held measurement noise added to ``y_i`` (eq. (localmeasure)), and the consensus term ``d_i`` of eq.
 (H_idefine): ``(L xhat)_i`` over the neighbour lists, or ``sum_{e: receiver e = i} a_e^g (xhat_i - r_e)``
-over the copies ``r_e`` node ``i`` holds, refreshed by the broadcasts (:func:`_exchange_copy`,
-:func:`_exchange_tile`: at the Euler steps ``s`` counted from the copy's reset that are multiples of
+over the copies ``r_e`` node ``i`` holds, refreshed by the broadcasts (in :func:`period_copy` and
+:func:`_tile_body`: at the Euler steps ``s`` counted from the copy's reset that are multiples of
 ``exchange_steps``, every delivering link takes the sender's estimate, or with ``oo_delay > 0`` the
 snapshot of ``lag`` broadcasts before from the copy's ring; the continuous exchange without delay
 refreshes them at every shortened step of a split Euler step too). The draws, the deliveries and the
@@ -233,45 +233,6 @@ def _take(rec, src, sender, deliver, n):
                 rec[e, c] = src[js + c]
 
 
-@_njit_inline
-def _exchange_copy(b, j, first, xhat, d, fault, fsc, substeps):
-    """The faulted O-O exchange of copy ``b`` at an evaluation of Euler step ``j`` (``first``: the step's
-    first, on the Euler grid): the broadcasts due (into the held copies ``r_e`` and the snapshot ring),
-    then ``d_i = sum_{e: receiver e = i} a_e (xhat_i - r_e)`` over the links into ``i`` (eq. (H_idefine)
-    with held copies; ``_FaultedExchange.grid`` / ``.sub`` of :mod:`.numpy_step`)."""
-    fa, fs = fault.args, fault.state
-    sender, receiver = fa.sender, fa.receiver
-    deliver, wl = fsc.deliver, fsc.weight
-    rec = fs.received[b]  # (E, n) held copies r_e
-    E, n = rec.shape[0], rec.shape[1]
-    N = d.shape[0] // n
-    M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
-    if first:
-        s = fs.period[b] * substeps + j  # Euler steps since the copy's reset
-        if fa.continuous or s % M == 0:  # a broadcast
-            if lag > 0:
-                snaps = fs.snapshots[b]  # (R, N, n)
-                qb = s // M
-                slot = qb % ring
-                for i in range(N):
-                    for c in range(n):
-                        snaps[slot, i, c] = xhat[i * n + c]
-                old = snaps[(qb - lag) % ring]  # not yet written before lag broadcasts: t = 0
-                _take(rec, old.reshape(N * n), sender, deliver, n)
-            else:
-                _take(rec, xhat, sender, deliver, n)
-    elif fa.continuous and lag == 0:  # continuous exchange: fresh copies in the shortened steps too
-        _take(rec, xhat, sender, deliver, n)
-    for q in range(N * n):
-        d[q] = 0.0
-    for e in range(E):
-        a = wl[e]
-        if a != 0.0:
-            ir = receiver[e] * n
-            for c in range(n):
-                d[ir + c] = d[ir + c] + a * (xhat[ir + c] - rec[e, c])
-
-
 @_njit
 def period_copy(b, pa, ka, sc, fault, fsc):
     """One control period of copy ``b`` in place (batch-first :class:`PeriodArrays` ``pa``, see module doc).
@@ -297,10 +258,21 @@ def period_copy(b, pa, ka, sc, fault, fsc):
     if fault is None:
         deg = ka.degree
     else:
+        # the faulted O-O exchange (numpy_step._FaultedExchange): its arrays taken out of the bundles once
+        # per period (per Euler step, each unpacked array would cost a reference count update)
         fk.deliveries_copy(b, fault, fsc)  # the period's deliveries (fault_state.oo_losses), the active graph
-        deg = fsc.degree
-        noisy = fault.args.noise_std > 0.0
-        noise_a = fault.state.noise
+        fa, fs = fault.args, fault.state
+        deg, wl, deliver = fsc.degree, fsc.weight, fsc.deliver
+        noisy = fa.noise_std > 0.0
+        noise_a = fs.noise
+        sender, receiver = fa.sender, fa.receiver
+        E = sender.shape[0]
+        k0 = fs.period[b]
+        rec = fs.received[b]  # (E, n) held copies r_e
+        snaps = fs.snapshots[b]  # (R, N, n)
+        M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
+        continuous = fa.continuous
+        refresh = continuous and lag == 0
     xb, xrb, vb, ub, rb = pa.x[b], pa.x_r[b], pa.v[b], pa.u[b], pa.r[b]
     zb = pa.z[b].reshape(N * n)  # node i's state at i * n
     # held inputs (ZOH over the control period): Bbar_i u, B u, B r
@@ -343,7 +315,31 @@ def period_copy(b, pa, ka, sc, fault, fsc):
                             for k in range(n):
                                 d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
             else:
-                _exchange_copy(b, j, first, xhat, d, fault, fsc, substeps)
+                # broadcasts (at the Euler steps s counted from the copy's reset that are multiples of M)
+                if first:
+                    s_ = k0 * substeps + j
+                    if continuous or s_ % M == 0:
+                        if lag > 0:
+                            qb = s_ // M
+                            slot = qb % ring
+                            for i in range(N):
+                                for k in range(n):
+                                    snaps[slot, i, k] = xhat[i * n + k]
+                            old = snaps[(qb - lag) % ring]  # not yet written before lag broadcasts: t = 0
+                            _take(rec, old.reshape(N * n), sender, deliver, n)
+                        else:
+                            _take(rec, xhat, sender, deliver, n)
+                elif refresh:  # continuous exchange: fresh copies in the shortened steps too
+                    _take(rec, xhat, sender, deliver, n)
+                # eq. (H_idefine) with held copies: d_i = sum_e a_e (xhat_i - r_e) over the links into i
+                for q in range(N * n):
+                    d[q] = 0.0
+                for e in range(E):
+                    a = wl[e]
+                    if a != 0.0:
+                        ir = receiver[e] * n
+                        for k in range(n):
+                            d[ir + k] = d[ir + k] + a * (xhat[ir + k] - rec[e, k])
             # w_i = P_u,i d_i through the thinner of the two bases:
             # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
             for q in range(N * rq):
@@ -481,107 +477,6 @@ def period_tile_any(ts, ka, wk, W, fault, ft, lo):
 
 
 @_njit_inline
-def _exchange_tile(j, XH, D, fault, ft, lo, W, substeps):
-    """The faulted O-O exchange of a tile at Euler step ``j`` (per lane: its deliveries, its graph's
-    weights, broadcasts at its own Euler step count), then ``D``: the sums of :func:`_exchange_copy` in
-    the same order (a link of weight 0 is skipped by a select). Snapshots (``oo_delay > 0``) are kept in
-    the tile (``ft.snap``) and written into the batch's ring for the unflagged lanes only
-    (:func:`~dobs_envs.sim.fault_kernel.scatter_lane`: a flagged lane is recomputed from the ring as it
-    was); reads come from the batch's ring: no snapshot of a period is read in that period
-    (``lag >= substeps / exchange_steps``)."""
-    fa = fault.args
-    snapshots_a = fault.state.snapshots
-    REC, WL, DL, KP, PH, BC = ft.received, ft.weight, ft.deliver, ft.period, ft.phase, ft.broadcast
-    TSN, TSLOT, TCNT, MK, LK, LP = ft.snap, ft.snap_slot, ft.snap_count, ft.mask, ft.links, ft.link_ptr
-    sender, receiver = fa.sender, fa.receiver
-    E = sender.shape[0]
-    N, n = XH.shape[0], XH.shape[1]
-    M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
-    continuous = fa.continuous
-    # broadcasts (per lane: its own Euler step count s = k S + j): s % M == 0 exactly when
-    # PH + j % M (both in [0, M)) is 0 or M
-    jm = j % M
-    any_bc = False
-    for c in range(W):
-        ph = PH[c] + jm
-        bc = continuous or ph == 0 or ph == M
-        BC[c] = bc
-        any_bc = any_bc or bc
-    if any_bc:
-        if lag > 0:
-            for c in range(W):
-                if BC[c]:
-                    b = lo + c
-                    qb = (KP[c] * substeps + j) // M
-                    slot = qb % ring
-                    old = (qb - lag) % ring
-                    t = TCNT[c]
-                    TSLOT[t, c] = slot
-                    TCNT[c] = t + 1
-                    for i in range(N):
-                        for k in range(n):
-                            TSN[t, i, k, c] = XH[i, k, c]
-                    for e in range(E):
-                        if DL[e, c]:
-                            js = sender[e]
-                            for k in range(n):
-                                REC[e, k, c] = snapshots_a[b, old, js, k]
-        else:
-            for e in range(E):
-                js = sender[e]
-                for c in range(W):
-                    MK[c] = BC[c] & DL[e, c]  # no short-circuit: a vector select below
-                for k in range(n):
-                    for c in range(W):
-                        REC[e, k, c] = XH[js, k, c] if MK[c] else REC[e, k, c]
-    # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as _exchange_copy)
-    if fa.switching:  # the lanes' graphs differ: a select per lane
-        for i in range(N):
-            for k in range(n):
-                for c in range(W):
-                    D[i, k, c] = 0.0
-        for e in range(E):
-            ir = receiver[e]
-            for k in range(n):
-                for c in range(W):
-                    a = WL[e, c]
-                    D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
-    else:  # one graph: the link's weight is every lane's; node i's links LK[LP[i]:LP[i+1]] (increasing e),
-        # up to two per pass over the lanes: ((0 + a_0 t_0) + a_1 t_1) + ..., the sums of _exchange_copy
-        weight = fa.weight
-        for i in range(N):
-            l0, l1 = LP[i], LP[i + 1]
-            for k in range(n):
-                if l0 == l1:
-                    for c in range(W):
-                        D[i, k, c] = 0.0
-                jl = l0
-                while jl < l1:
-                    e0 = LK[jl]
-                    a0 = weight[0, e0]
-                    if jl + 1 < l1:
-                        e1 = LK[jl + 1]
-                        a1 = weight[0, e1]
-                        if jl == l0:
-                            for c in range(W):
-                                xh = XH[i, k, c]
-                                D[i, k, c] = 0.0 + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
-                        else:
-                            for c in range(W):
-                                xh = XH[i, k, c]
-                                D[i, k, c] = D[i, k, c] + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
-                        jl += 2
-                    else:
-                        if jl == l0:
-                            for c in range(W):
-                                D[i, k, c] = 0.0 + a0 * (XH[i, k, c] - REC[e0, k, c])
-                        else:
-                            for c in range(W):
-                                D[i, k, c] = D[i, k, c] + a0 * (XH[i, k, c] - REC[e0, k, c])
-                        jl += 1
-
-
-@_njit_inline
 def _tile_body(ts, ka, wk, W, fault, ft, lo):
     """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place.
 
@@ -607,9 +502,18 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
         for c in range(W):
             FL[c] = 0.0
     else:
-        noisy = fault.args.noise_std > 0.0
+        # the faulted O-O exchange, per lane (its deliveries, its graph's weights, broadcasts at its own Euler
+        # step count); the arrays taken out of the bundles once per period
+        fa = fault.args
+        snapshots_a = fault.state.snapshots
+        noisy = fa.noise_std > 0.0
         NZ, DEG, KP, PH = ft.noise, ft.degree, ft.period, ft.phase
-        M = fault.args.exchange_steps
+        REC, WL, DL, BC = ft.received, ft.weight, ft.deliver, ft.broadcast
+        TSN, TSLOT, TCNT, MK, LK, LP = ft.snap, ft.snap_slot, ft.snap_count, ft.mask, ft.links, ft.link_ptr
+        sender, receiver, weight = fa.sender, fa.receiver, fa.weight
+        E = sender.shape[0]
+        M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
+        continuous, switching = fa.continuous, fa.switching
         for c in range(W):
             FL[c] = 0.0
             PH[c] = (KP[c] * substeps) % M  # once per period: no integer division per lane and Euler step
@@ -643,7 +547,86 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
                             for c in range(W):
                                 D[i, k, c] = D[i, k, c] - a * XH[jn, k, c]
         else:
-            _exchange_tile(j, XH, D, fault, ft, lo, W, substeps)
+            # broadcasts (per lane: its own Euler step count s = k S + j): s % M == 0 exactly when
+            # PH + j % M (both in [0, M)) is 0 or M
+            jm = j % M
+            any_bc = False
+            for c in range(W):
+                ph = PH[c] + jm
+                bc = continuous or ph == 0 or ph == M
+                BC[c] = bc
+                any_bc = any_bc or bc
+            if any_bc:
+                if lag > 0:
+                    for c in range(W):
+                        if BC[c]:
+                            b = lo + c
+                            qb = (KP[c] * substeps + j) // M
+                            slot = qb % ring
+                            old = (qb - lag) % ring
+                            t = TCNT[c]
+                            TSLOT[t, c] = slot
+                            TCNT[c] = t + 1
+                            for i in range(N):
+                                for k in range(n):
+                                    TSN[t, i, k, c] = XH[i, k, c]
+                            for e in range(E):
+                                if DL[e, c]:
+                                    js = sender[e]
+                                    for k in range(n):
+                                        REC[e, k, c] = snapshots_a[b, old, js, k]
+                else:
+                    for e in range(E):
+                        js = sender[e]
+                        for c in range(W):
+                            MK[c] = BC[c] & DL[e, c]  # no short-circuit: a vector select below
+                        for k in range(n):
+                            for c in range(W):
+                                REC[e, k, c] = XH[js, k, c] if MK[c] else REC[e, k, c]
+            # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as period_copy)
+            if switching:  # the lanes' graphs differ: a select per lane
+                for i in range(N):
+                    for k in range(n):
+                        for c in range(W):
+                            D[i, k, c] = 0.0
+                for e in range(E):
+                    ir = receiver[e]
+                    for k in range(n):
+                        for c in range(W):
+                            a = WL[e, c]
+                            D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
+            else:  # one graph: the link's weight is every lane's; node i's links LK[LP[i]:LP[i+1]] (increasing e),
+                # up to two per pass over the lanes: ((0 + a_0 t_0) + a_1 t_1) + ..., the sums of period_copy
+                for i in range(N):
+                    l0, l1 = LP[i], LP[i + 1]
+                    for k in range(n):
+                        if l0 == l1:
+                            for c in range(W):
+                                D[i, k, c] = 0.0
+                        jl = l0
+                        while jl < l1:
+                            e0 = LK[jl]
+                            a0 = weight[0, e0]
+                            if jl + 1 < l1:
+                                e1 = LK[jl + 1]
+                                a1 = weight[0, e1]
+                                if jl == l0:
+                                    for c in range(W):
+                                        xh = XH[i, k, c]
+                                        D[i, k, c] = 0.0 + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                                else:
+                                    for c in range(W):
+                                        xh = XH[i, k, c]
+                                        D[i, k, c] = D[i, k, c] + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                                jl += 2
+                            else:
+                                if jl == l0:
+                                    for c in range(W):
+                                        D[i, k, c] = 0.0 + a0 * (XH[i, k, c] - REC[e0, k, c])
+                                else:
+                                    for c in range(W):
+                                        D[i, k, c] = D[i, k, c] + a0 * (XH[i, k, c] - REC[e0, k, c])
+                                jl += 1
         for i in range(N):
             for c_ in range(rq):
                 _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
