@@ -9,7 +9,7 @@ Usage: python benchmarks/bench_design.py [--nodes 50] [--states 100] [--seed 0] 
 
 ``--single-node``: one node of a random plant (``single_node_system``) of each size,
 designed by the current :func:`strong_detectability` and by the frozen copy of the
-implementation before issue 12 (``tests/_lemma2_reference.py``: ``_unobservable_subspace``
+implementation before issue 12 (``tests/_lemma2_prerewrite_snapshot.py``: ``_unobservable_subspace``
 recomputes a full SVD at each of up to r + 1 steps, O(n^4)) on the same data in the same
 run, alternating the two so that load on a shared machine hits both alike. Prints both
 times, their ratio and whether the results agree (delta, subspace, E_bar = T_d E T_d^T).
@@ -71,12 +71,12 @@ _TESTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 
 
 def _reference():
-    """The frozen pre-issue-12 strong_detectability (tests/_lemma2_reference.py)."""
+    """The frozen pre-issue-12 strong_detectability (tests/_lemma2_prerewrite_snapshot.py)."""
     if _TESTS not in sys.path:
         sys.path.insert(0, _TESTS)
-    import _lemma2_reference
+    import _lemma2_prerewrite_snapshot
 
-    return _lemma2_reference.strong_detectability
+    return _lemma2_prerewrite_snapshot.strong_detectability
 
 
 def single_node_system(n: int, p: int = 3, m: int = 2, seed: int = 0):

@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_design_ray.py [--part design|benchmark|all] [--nodes 1000] [--states 60]
-        [--seed 0] [--no-one-cpu] [--results /work/main/results] [--json FILE]
+        [--seed 0] [--no-one-cpu] [--results DIR | --base REF|PATH] [--json FILE]
 
 ``--part design``
     One seeded random network from the project's generator
@@ -48,6 +48,9 @@ Usage::
     table (the other bracket, "update-bound") takes (d)'s runs at their agent's own seconds per step on
     tracking.
     Evaluation and the analytic baselines are not in ``train_seconds`` and not projected.
+    The records are read from ``--results DIR`` (default: this checkout's ``results/``) or from the
+    ``results/`` of ``--base``: a directory, or a git ref of this repository checked out in a temporary
+    ``git worktree`` for the run and removed afterwards (``benchmarks/checkouts.py``).
 
 BLAS threads are pinned to one before numpy is imported (see ``bench_design.py``: on this loaded
 2-core machine multi-threaded OpenBLAS made the design ~30x slower); Ray workers inherit the
@@ -62,6 +65,7 @@ if __name__ == "__main__":  # before numpy is imported: env vars are read at loa
         os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import glob  # noqa: E402
 import json  # noqa: E402
@@ -72,6 +76,7 @@ import time  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import projection as proj  # noqa: E402
+from checkouts import REPO, checkout  # noqa: E402
 
 CORES = (2, 32, 128)
 OFF_POLICY = ("sac", "td3", "crossq")
@@ -419,9 +424,12 @@ def main(argv=None) -> int:
     ap.add_argument("--states", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-one-cpu", action="store_true", help="skip the 1-CPU Ray run (the out-of-sample check)")
-    ap.add_argument("--results", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                                      "results"),
-                    help="directory of the stored run archives (default: the repository's results/)")
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--results", default=os.path.join(REPO, "results"),
+                     help="directory of the stored run archives (default: this checkout's results/)")
+    src.add_argument("--base", metavar="REF|PATH",
+                     help="read the run archives from the results/ of this checkout: a directory, or a git ref "
+                          "checked out in a temporary git worktree for the run")
     ap.add_argument("--json", help="write every figure here (refuses an existing file)")
     args = ap.parse_args(argv)
     if args.json and os.path.exists(args.json):
@@ -431,7 +439,14 @@ def main(argv=None) -> int:
     if args.part in ("design", "all"):
         out["design"] = run_design(args.nodes, args.states, args.seed, not args.no_one_cpu)
     if args.part in ("benchmark", "all"):
-        out["benchmark"] = run_benchmark_projection(args.results)
+        with contextlib.ExitStack() as stack:
+            results = args.results
+            if args.base is not None:
+                try:
+                    results = os.path.join(stack.enter_context(checkout(args.base)), "results")
+                except ValueError as exc:
+                    ap.error(str(exc))
+            out["benchmark"] = run_benchmark_projection(results)
     out["load_avg_end"] = _load()
     print(f"\nload average (1, 5, 15 min): start {out['load_avg_start']}, end {out['load_avg_end']} on "
           f"{os.cpu_count()} cores")

@@ -1,6 +1,6 @@
-"""Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and today's main.
+"""Environment throughput in one run: single env, native vector env at B = 1, 64, 1024, and a base checkout.
 
-Usage: python benchmarks/bench_envs.py [--main /work/main] [--repeats 7] [--seconds 0.4] [--no-main]
+Usage: python benchmarks/bench_envs.py [--base REF|PATH] [--repeats 7] [--seconds 0.4] [--no-base]
        [--env-id dobs_envs/Tracking-v0] [--batches 1,64,1024] [--faults lossy|none|JSON] [--clock wall|cpu]
 
 Everything is measured side by side in one run, interleaved (config A, B, C, ..., A, B, C,
@@ -12,9 +12,10 @@ with training runs: only ratios measured this way mean anything):
 - vector env: ``gym.make_vec("dobs_envs/Tracking-v0", num_envs=B)`` env-steps/s
   (``B`` x steps/s) at B = 1, 64, 1024, serial (``threads=1``) and with one thread per core
   (``threads=None``, the default: ranges of copies advanced concurrently, GIL released);
-- the same single envs of another checkout (``--main``, default ``/work/main``: today's
-  main) in a worker process started with that checkout first on ``sys.path`` (and its own
-  numba cache directory, so nothing is written into it), timed in the same interleaved loop,
+- the same single envs of another checkout (``--base``: a directory, or a git ref of this repository
+  checked out in a temporary ``git worktree`` for the run and removed afterwards, ``benchmarks/checkouts.py``;
+  default the branch ``main``) in a worker process started with that checkout first on ``sys.path`` (and
+  its own numba cache directory, so nothing is written into it), timed in the same interleaved loop,
   and that checkout's serial vector env at the largest ``--batches`` size;
 - communication faults (issue 23): the vector env at the largest ``--batches`` size with the option
   ``faults=`` (``--faults``: ``lossy``, the default, is ``tracking_lossy_v0``'s setting; a JSON dict;
@@ -34,6 +35,7 @@ AVX-512, 4 with AVX2) x 2 flops x clock (``cpu MHz`` of /proc/cpuinfo).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -42,6 +44,9 @@ import tempfile
 import time
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from checkouts import add_base_argument, checkout  # noqa: E402
 
 ENV_ID = "dobs_envs/Tracking-v0"
 POOL = 512
@@ -139,8 +144,8 @@ def peak_flops() -> tuple[float, str]:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--main", default="/work/main", help="checkout to compare the single envs with")
-    ap.add_argument("--no-main", action="store_true")
+    add_base_argument(ap, what="checkout to compare the single envs with")
+    ap.add_argument("--no-base", action="store_true", help="time this checkout only")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
     ap.add_argument("--batches", default="1,64,1024")
@@ -152,6 +157,17 @@ def main(argv=None):
                          "(process_time: on a loaded machine, not the time a run waits for a core); threaded "
                          "runs always by the wall clock")
     args = ap.parse_args(argv)
+    if args.no_base:
+        return _run(args, None)
+    with contextlib.ExitStack() as stack:
+        try:
+            base = stack.enter_context(checkout(args.base))
+        except ValueError as exc:
+            ap.error(str(exc))
+        return _run(args, base)
+
+
+def _run(args, base):
     env_id = args.env_id
     now = time.process_time if args.clock == "cpu" else time.perf_counter
 
@@ -214,15 +230,15 @@ def main(argv=None):
             v.step(acts[k % 8])
         return n * key[0] / (clock() - t0)
 
-    worker = None if args.no_main else Worker(args.main, env_id, args.clock)
+    worker = None if base is None else Worker(base, env_id, args.clock)
     configs = {"gym single (this checkout)": ("gym", None), "PettingZoo single (this checkout)": ("pz", None)}
     if worker is not None:
-        configs["gym single (main)"] = ("gym", "main")
-        configs["PettingZoo single (main)"] = ("pz", "main")
+        configs["gym single (base)"] = ("gym", "main")
+        configs["PettingZoo single (base)"] = ("pz", "main")
     for key in vec:
         configs[f"vector B={key[0]}{' threads' if key[1] else ''}{' faults' if key[2] else ''}"] = ("vec", key)
     if worker is not None:
-        configs[f"vector B={batches[-1]} (main)"] = (f"vec{batches[-1]}", "main")
+        configs[f"vector B={batches[-1]} (base)"] = (f"vec{batches[-1]}", "main")
 
     # ---------------------------------------------------------------- calibrate run lengths, warm up
     steps = {}
@@ -261,24 +277,24 @@ def main(argv=None):
     for name in configs:
         print(f"{name:36s} {best[name]:13,.0f} {best[name] / single:13.2f}")
     if worker is not None:
-        print(f"main checkout imported from {main_file}")
-        print(f"single env vs main: gym {single / best['gym single (main)']:.2f}x, PettingZoo "
-              f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (main)']:.2f}x; "
-              f"vector B={batches[-1]} (serial) vs main: "
-              f"{best[f'vector B={batches[-1]}'] / best[f'vector B={batches[-1]} (main)']:.2f}x")
+        print(f"base checkout ({args.base}) imported from {main_file}")
+        print(f"single env vs base: gym {single / best['gym single (base)']:.2f}x, PettingZoo "
+              f"{best['PettingZoo single (this checkout)'] / best['PettingZoo single (base)']:.2f}x; "
+              f"vector B={batches[-1]} (serial) vs base: "
+              f"{best[f'vector B={batches[-1]}'] / best[f'vector B={batches[-1]} (base)']:.2f}x")
     if faults is not None:
         Bm = batches[-1]
         print(f"faults {json.dumps(faults)} vs none, vector B={Bm}: serial "
               f"{best[f'vector B={Bm} faults'] / best[f'vector B={Bm}']:.2f}x, threads "
               f"{best[f'vector B={Bm} threads faults'] / best[f'vector B={Bm} threads']:.2f}x (target >= 0.7x)")
-    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}") and not k.endswith("(main)")
+    top = max((k for k in configs if k.startswith(f"vector B={batches[-1]}") and not k.endswith("(base)")
                and "faults" not in k),
               key=lambda k: best[k])
     print(f"best B={batches[-1]}: {top} = {best[top] / single:.1f}x the gym single env (target >= 8x)")
     print(f"flops per control step: {flops:,} ({flops_per_period(core.params):,} simulation + "
           f"{flops_per_row(core):,} features/reward)")
     for name in configs:
-        if name.startswith(f"vector B={batches[-1]}") and not name.endswith("(main)") and "faults" not in name:
+        if name.startswith(f"vector B={batches[-1]}") and not name.endswith("(base)") and "faults" not in name:
             print(f"{name}: {best[name] * flops / 1e9:.1f} GFLOP/s = {best[name] * flops / peak:.1%} of the peak "
                   f"{peak / 1e9:.0f} GFLOP/s ({peak_desc})")
 

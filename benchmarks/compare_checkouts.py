@@ -1,9 +1,11 @@
 """Two checkouts side by side: bit-for-bit outputs and speed (single env, vector env B = 1024).
 
-Usage: python benchmarks/compare_checkouts.py [--base /work/main] [--head .] [--digest] [--speed]
+Usage: python benchmarks/compare_checkouts.py [--base REF|PATH] [--head REF|PATH] [--digest] [--speed]
        [--repeats 7] [--seconds 0.4] [--batch 1024] [--env-id dobs_envs/Tracking-v0]
 
-Each checkout runs in its own worker process (that checkout first on ``sys.path``, its own
+``--base`` (default: the branch ``main``) and ``--head`` (default: this checkout) are each a directory or a
+git ref of this repository, checked out in a temporary ``git worktree`` for the run and removed afterwards
+(``benchmarks/checkouts.py``). Each checkout runs in its own worker process (that checkout first on ``sys.path``, its own
 numba cache directory under the temp dir, nothing written into the checkouts), so both sides
 are measured the same way:
 
@@ -16,7 +18,10 @@ are measured the same way:
   (observations, rewards, flags, every info value, actions mapped to inputs): the PettingZoo env
   (also with ``normalized_actions``/``padded_observations``), ``gym.make`` and ``gym.make_vec`` and
   SB3 ``agents.core_vec_env.CoreVecEnv`` (centralised and shared slots, agent ids, rescaled actions,
-  diagnostics; skipped when the checkout has no ``agents``). Prints one line per run and whether
+  diagnostics; skipped when the checkout has no ``agents``); communication faults (each kind alone and
+  all at once on the tracking core, tiles, remainder tiles, copy by copy, two threads; every env with all
+  of them; large states with them; ``tracking_lossy``; faulted ``rollout`` of NE2), the fault state
+  and the C-O masks included. Prints one line per run and whether
   the two checkouts agree bit for bit.
 - ``--speed`` (default): ``gym.make(env_id)`` control steps/s (single env),
   ``gym.make_vec(env_id, num_envs=B, threads=1)`` env-steps/s, and the simulation kernel alone
@@ -29,11 +34,15 @@ are measured the same way:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
 import sys
 import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from checkouts import REPO, add_base_argument, checkout  # noqa: E402
 
 WORKER = r'''
 import hashlib, json, sys, time
@@ -87,6 +96,59 @@ def digest():
     x0 *= np.linspace(1.0, 900.0, TILE + 9)[:, None] / np.linalg.norm(x0, axis=1, keepdims=True)
     out["core large states (split steps)"] = run_core(big, list(range(TILE + 9)), steps=6, gain=1.0,
                                                       options={"x0": x0})
+    # communication faults: every kind alone and all at once, tiles, remainder tiles, copy by copy, threads;
+    # the fault state is in the digest too
+    def fault_cases_of(N):
+        ring = np.zeros((N, N))
+        for i in range(N):
+            ring[i, (i + 1) % N] = ring[(i + 1) % N, i] = 1.0
+        cut = ring.copy()
+        cut[0, 1] = cut[1, 0] = cut[2, 3] = cut[3, 2] = 0.0
+        return fault_cases_graphs(ring, cut)
+
+    def fault_cases_graphs(ring, cut):
+        return {
+        "sampled": dict(oo_period=0.01), "drifting": dict(oo_period=0.03, oo_delay=2), "loss": dict(oo_loss=0.3),
+        "burst": dict(oo_burst={"p_good_bad": 0.2, "p_bad_good": 0.3, "loss_good": 0.05, "loss_bad": 0.9}),
+        "delay": dict(oo_delay=3), "noise": dict(measurement_noise=0.05), "co": dict(co_loss=0.3, co_delay=2),
+        "switching": dict(switching={"graphs": [ring, np.zeros_like(ring), cut],
+                                     "transition": [[0.6, 0.2, 0.2], [0.3, 0.4, 0.3], [0.3, 0.3, 0.4]]}),
+        "all": dict(oo_period=0.005, oo_loss=0.2, oo_delay=1, co_loss=0.3, co_delay=2, measurement_noise=0.05,
+                    switching={"graphs": [ring, cut], "rate": 3.0}),
+        }
+
+    fault_cases = fault_cases_of(TrackingEnv.make_core(1).n_nodes)
+
+    def fault_hash(core):
+        return h(*core.fault_state, core.co_received)
+
+    for fname, fk in fault_cases.items():
+        for B, threads in ((TILE + 77, 1), (3, 1), (TILE + 77, 2)) if fname == "all" else ((TILE + 77, 1), (3, 1)):
+            core = TrackingEnv.make_core(B, threads=threads, max_cycles=12, faults=fk)
+            out[f"core tracking faults={fname} B={B} threads={threads}"] = (run_core(core, list(range(100, 100 + B)))
+                                                                         + fault_hash(core))
+            core.close()
+    for name, (cls, kw) in envs.items():
+        N = cls.make_core(1, **kw).n_nodes
+        core = cls.make_core(TILE + 9, max_cycles=12, faults=fault_cases_of(N)["all"], **kw)
+        out[f"core {name} faults=all B={TILE + 9}"] = run_core(core, list(range(TILE + 9))) + fault_hash(core)
+    big = DisturbanceRejectionEnv.make_core(TILE + 9, max_cycles=100, state_bound=1e4,
+                                            faults=fault_cases_of(big.n_nodes)["all"])
+    out["core large states (split steps) faults=all"] = run_core(big, list(range(TILE + 9)), steps=6, gain=1.0,
+                                                                 options={"x0": x0}) + fault_hash(big)
+    from dobs_envs.registry import ENVIRONMENTS
+    if "tracking_lossy" in ENVIRONMENTS:
+        import importlib
+        mod, _, cname = ENVIRONMENTS["tracking_lossy"].entry_point.partition(":")
+        lossy = getattr(importlib.import_module(mod), cname)
+        for B in (TILE + 77, 3):
+            core = lossy.make_core(B, max_cycles=12)
+            out[f"core tracking_lossy B={B}"] = run_core(core, list(range(100, 100 + B))) + fault_hash(core)
+    for fname in ("loss", "delay", "noise", "co", "all"):
+        sc2 = PAPER_SCENARIOS["ne2"]()
+        trs = rollout(sc2, t_end=0.3, batch=TILE + 7, faults=fault_cases_of(sc2.n_observers)[fname], fault_seed=5)
+        out[f"rollout ne2 faults={fname} B={TILE + 7}"] = h(*[getattr(tr, f) for tr in trs
+                                                               for f in ("t", "x", "est_err", "gamma", "gamma_s", "u")])
     for name in sorted(PAPER_SCENARIOS):
         trs = rollout(PAPER_SCENARIOS[name](), t_end=0.3, batch=2)
         out[f"rollout {name}"] = h(*[getattr(tr, f) for tr in trs for f in ("t", "x", "est_err", "gamma", "gamma_s", "u")])
@@ -293,9 +355,9 @@ class Worker:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", default="/work/main", help="reference checkout (default: today's main)")
-    ap.add_argument("--head", default=os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                    help="checkout compared with it (default: this one)")
+    add_base_argument(ap, what="reference checkout")
+    ap.add_argument("--head", default=REPO, metavar="REF|PATH",
+                    help="checkout compared with it, a directory or a git ref (default: this checkout)")
     ap.add_argument("--digest", action="store_true", help="compare the outputs bit for bit")
     ap.add_argument("--speed", action="store_true", help="compare the speed (the default without --digest)")
     ap.add_argument("--repeats", type=int, default=7)
@@ -307,7 +369,16 @@ def main(argv=None):
                          "machine, not the time the worker waits for a core; single-threaded runs only)")
     args = ap.parse_args(argv)
     speed = args.speed or not args.digest
-    workers = {"base": Worker(args.base), "head": Worker(args.head)}
+    with contextlib.ExitStack() as stack:
+        try:
+            paths = {k: stack.enter_context(checkout(getattr(args, k))) for k in ("base", "head")}
+        except ValueError as exc:
+            ap.error(str(exc))
+        return _compare(args, speed, paths)
+
+
+def _compare(args, speed, paths):
+    workers = {k: Worker(path) for k, path in paths.items()}
     for k, w in workers.items():
         print(f"{k}: {w.file}")
     status = 0

@@ -27,8 +27,8 @@ __all__ = ["KERNEL_MODULES", "ensure_fresh", "fingerprint", "cache_dir"]
 #: others), then the declarations of the kernels' arguments (``sim/kernel_args.py``) and the generator
 #: of their compiled unpacking (``packing.py``): numba caches that generated code under the kernel
 #: module's file, which does not change when a declaration does
-KERNEL_MODULES = ("sim/period_kernel.py", "envs/step_kernel.py", "envs/features.py", "control/law_kernel.py",
-                  "rollout.py", "sim/fault_kernel.py", "envs/fault_step_kernel.py", "sim/kernel_args.py",
+KERNEL_MODULES = ("sim/period_kernel.py", "sim/jit.py", "envs/step_kernel.py", "envs/features.py", "control/law_kernel.py",
+                  "rollout.py", "sim/fault_kernel.py", "sim/kernel_args.py",
                   "sim/fault_state.py", "sim/fault_rng.py", "packing.py")
 
 #: name of the file, in a module's cache directory, that records the fingerprint its cache was built from

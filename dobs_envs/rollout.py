@@ -24,8 +24,9 @@ the measurement noise stepped/redrawn every step; ``oo_period`` a multiple of ``
 Per step and copy: the nodes' estimates with the held measurement noise, the C-O links
 (:func:`dobs_envs.sim.fault_kernel.co_link_row`; not at ``t = 0``, where every controller holds the
 initial estimate), the law applied to the estimates the controllers hold, then one faulted Euler
-step (:func:`dobs_envs.sim.fault_kernel.advance_rows_faulted`). Each copy's faults are drawn from its
-own seed (``fault_seed``). Reference: :func:`rollout_reference` with the same ``faults``.
+step (:func:`dobs_envs.sim.period_kernel.advance_rows` with a
+:class:`~dobs_envs.sim.fault_kernel.FaultPeriod`: one compiled kernel, specialised without fault code for
+``faults=None``). Each copy's faults are drawn from its own seed (``fault_seed``). Reference: :func:`rollout_reference` with the same ``faults``.
 """
 from __future__ import annotations
 
@@ -40,11 +41,11 @@ from .control.law_kernel import law_arrays, law_copy
 from .numba_cache import ensure_fresh
 from .packing import pack
 from .sim import estimates, step_env
-from .sim.fault_kernel import _fields, advance_rows_faulted, co_link_row, unpack_fault_args
-from .sim.fault_state import co_link_numpy, fault_args, faulted_estimates, init_fault_state
+from .sim.fault_kernel import FaultPeriod, co_link_row, unpack_fault_args
+from .sim.fault_state import FaultState, co_link_numpy, fault_args, faulted_estimates, init_fault_state
 from .sim.faults import Faults
 from .sim.numpy_step import control_period_faulted_numpy
-from .sim.period_kernel import advance_rows, unpack_kernel_args
+from .sim.period_kernel import PeriodArrays, advance_rows, unpack_kernel_args
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -145,7 +146,7 @@ class Recording(NamedTuple):
 @numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy", inline="always")
 def _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta):
     """Sample ``s`` of copy ``b``: state, reference state, each node's estimation error ``||xhat_i - x||``
-    and the adaptive gains (shared by both rollout kernels)."""
+    and the adaptive gains."""
     N, n = xhat.shape
     rec.x[b, s] = xb
     rec.x_r[b, s] = x_r[b]
@@ -161,10 +162,16 @@ def _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta):
 
 
 @numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
-    """Run ``loop.steps`` Euler steps of every copy in place (state ``x .. x_r``, controller gains
-    ``beta (B, Nc)``), the law :class:`~dobs_envs.control.law_kernel.LawArrays` ``law`` applied at
-    every step, recording into :class:`Recording` ``rec`` every ``loop.stride`` steps."""
+def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
+    """Run ``loop.steps`` Euler steps of every copy in place (``state = (x, z, gamma, gamma_s, v, x_r)``,
+    controller gains ``beta (B, Nc)``), the law :class:`~dobs_envs.control.law_kernel.LawArrays` ``law``
+    applied at every step, recording into :class:`Recording` ``rec`` every ``loop.stride`` steps;
+    ``kp = (KF, KI)`` the packed kernel arguments. ``fault`` None (the ideal network: a specialisation
+    without fault code) or ``(FF, FI, fs, co_nodes)``, communication faults (module doc): the estimates
+    carry the held measurement noise, the law reads the estimates the controllers hold after the C-O links
+    (node ``co_nodes[l]``'s row replaced by link ``l``'s held estimate), the Euler steps are faulted."""
+    x, z, gamma, gamma_s, v, x_r = state
+    KF, KI = kp
     ka = unpack_kernel_args(KF, KI)
     C, G_bar = ka.C, ka.G_bar
     oracle, eps, phi_beta, decay, gain = loop.oracle, loop.eps, loop.phi_beta, loop.decay, loop.gain
@@ -177,85 +184,47 @@ def _rollout_kernel(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec):
     u = np.zeros((Bsz, m))
     r = np.zeros((Bsz, m))
     w = np.empty(m)
+    pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
+    if fault is not None:
+        FF, FI, fst, co_nodes = fault
+        ff = unpack_fault_args(FF, FI)
+        fs = FaultState(*fst)
+        fperiod = FaultPeriod(ff, fs, np.empty((Bsz, ff.sender.shape[0]), dtype=np.bool_))
+        noise_a, co_held_a = fs.noise, fs.co_held
+        K = co_nodes.shape[0]
+        xl = np.empty((N, n))
+        co_rx = np.ones((Bsz, K), dtype=np.bool_)
     s = 0
     for k in range(steps + 1):
         record = k % stride == 0
         for b in range(Bsz):
             xb = x[b]
-            # eq. (localmeasure) y_i = C_i x, eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
+            # eq. (localmeasure) y_i = C_i x (+ the held noise), eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
             for i in range(N):
                 for q in range(p):
                     acc = 0.0
                     for c in range(n):
                         acc += C[i, q, c] * xb[c]
-                    y[q] = acc
+                    if fault is None:
+                        y[q] = acc
+                    else:
+                        y[q] = acc + noise_a[b, i, q]
                 for c in range(n):
                     acc = z[b, i, c]
                     for q in range(p):
                         acc += G_bar[i, c, q] * y[q]
                     xhat[i, c] = acc
-            if record:
-                _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta)
-            if k < steps:
-                law_copy(law, xhat, xb, oracle, ref[k], cmd[k], beta[b], eps[b], phi_beta[b], decay, gain, u[b], w)
-                for j in range(m):
-                    r[b, j] = ref[k, j]
-            if record:
-                rec.u[b, s] = u[b]  # the input applied from t_k on (at the last sample: the one before)
-        if record:
-            s += 1
-        if k < steps:
-            advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, 0, Bsz)
-
-
-@numba.njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
-def _rollout_kernel_faulted(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loop, rec, FF, FI, fs, co_nodes):
-    """:func:`_rollout_kernel` with communication faults (module doc): the estimates carry the held
-    measurement noise, the law reads the estimates the controllers hold after the C-O links (node
-    ``co_nodes[l]``'s row replaced by link ``l``'s held estimate), the Euler steps are faulted."""
-    ka = unpack_kernel_args(KF, KI)
-    ff = unpack_fault_args(FF, FI)
-    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a, noise_a, co_sent_a, co_held_a = _fields(fs)
-    C, G_bar = ka.C, ka.G_bar
-    oracle, eps, phi_beta, decay, gain = loop.oracle, loop.eps, loop.phi_beta, loop.decay, loop.gain
-    cmd, ref, steps, stride = loop.cmd, loop.ref, loop.steps, loop.stride
-    Bsz, N, n = z.shape[0], z.shape[1], z.shape[2]
-    m = law.K.shape[0]
-    p = C.shape[1]
-    K = co_nodes.shape[0]
-    xhat = np.empty((N, n))
-    xl = np.empty((N, n))
-    y = np.empty(p)
-    u = np.zeros((Bsz, m))
-    r = np.zeros((Bsz, m))
-    w = np.empty(m)
-    co_rx = np.ones((Bsz, K), dtype=np.bool_)
-    delivered = np.empty((Bsz, ff.sender.shape[0]), dtype=np.bool_)
-    s = 0
-    for k in range(steps + 1):
-        record = k % stride == 0
-        for b in range(Bsz):
-            xb = x[b]
-            # eq. (localmeasure) with the held noise, eq. (hatxieq)
-            for i in range(N):
-                for q in range(p):
-                    acc = 0.0
+            if fault is None:
+                xl = xhat
+            else:  # the C-O links (not at t = 0), the controllers' held estimates in their node rows
+                if k > 0:
+                    co_link_row(b, xhat.reshape(N * n), co_nodes, ff, fs, co_rx)
+                for i in range(N):
                     for c in range(n):
-                        acc += C[i, q, c] * xb[c]
-                    y[q] = acc + noise_a[b, i, q]
-                for c in range(n):
-                    acc = z[b, i, c]
-                    for q in range(p):
-                        acc += G_bar[i, c, q] * y[q]
-                    xhat[i, c] = acc
-            if k > 0:
-                co_link_row(b, xhat.reshape(N * n), co_nodes, ff, fs, co_rx)
-            for i in range(N):
-                for c in range(n):
-                    xl[i, c] = xhat[i, c]
-            for l in range(K):
-                for c in range(n):
-                    xl[co_nodes[l], c] = co_held_a[b, l, c]
+                        xl[i, c] = xhat[i, c]
+                for l in range(K):
+                    for c in range(n):
+                        xl[co_nodes[l], c] = co_held_a[b, l, c]
             if record:
                 _record_sample(rec, b, s, xb, x_r, xhat, gamma, gamma_s, beta)
             if k < steps:
@@ -263,11 +232,14 @@ def _rollout_kernel_faulted(x, z, gamma, gamma_s, v, x_r, beta, KF, KI, law, loo
                 for j in range(m):
                     r[b, j] = ref[k, j]
             if record:
-                rec.u[b, s] = u[b]
+                rec.u[b, s] = u[b]  # the input applied from t_k on (at the last sample: the one before)
         if record:
             s += 1
         if k < steps:
-            advance_rows_faulted(x, z, gamma, gamma_s, v, x_r, u, r, ka, ff, fs, delivered, 0, Bsz)
+            if fault is None:
+                advance_rows(pa, ka, 0, Bsz, None)
+            else:
+                advance_rows(pa, ka, 0, Bsz, fperiod)
 
 
 def fault_seeds(seed, batch: int) -> np.ndarray:
@@ -358,13 +330,11 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
                     beta=np.empty((batch, R, Nc)))
     x, z, g, gs, v, xr = (np.array(a, dtype=float, order="C") for a in
                           (state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r))
-    if faults is None:
-        _rollout_kernel(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec)
-    else:
+    fault = None
+    if faults is not None:
         fa, fs, co_nodes = _fault_setup(sc, params, faults, state, fault_seeds(fault_seed, batch))
-        fst = tuple(np.array(a, copy=True, order="C") for a in fs)
-        _rollout_kernel_faulted(x, z, g, gs, v, xr, beta, *params.kernel_packed, law, loop, rec, *pack(fa), fst,
-                                co_nodes)
+        fault = (*pack(fa), tuple(np.array(a, copy=True, order="C") for a in fs), co_nodes)
+    _rollout_kernel((x, z, g, gs, v, xr), beta, params.kernel_packed, law, loop, rec, fault)
     if steps % stride == 0 and R > 1:
         rec.u[:, -1] = rec.u[:, -2]
     t = np.arange(R) * (dt * stride)

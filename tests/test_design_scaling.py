@@ -1,7 +1,7 @@
 """Issue 12, item 7: the design layer on badly scaled systems.
 
 Every system below made the implementation before issue 12
-(``tests/_lemma2_reference.py``) end in an internal ``RuntimeError`` ("could
+(``tests/_lemma2_prerewrite_snapshot.py``) end in an internal ``RuntimeError`` ("could
 not find a stabilising J_2", "E not Hurwitz", "result fails its defining
 equations", "unobservable modes ... not all stable") or overflow the ARE shift.
 Now :func:`strong_detectability` either succeeds, with the defining equations
@@ -34,7 +34,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from _lemma2_reference import strong_detectability as reference_strong_detectability
+from _lemma2_prerewrite_snapshot import strong_detectability as reference_strong_detectability
 from dobs_envs.assumptions import AssumptionError
 from dobs_envs.design import IllConditionedError, design_distributed_observer, observer_residuals
 from dobs_envs.design.lemma2 import lemma2_residuals, strong_detectability
@@ -141,7 +141,7 @@ REPRODUCERS = {
 
 @pytest.mark.parametrize("message", sorted(REPRODUCERS))
 def test_fuzz_reproducers_now_succeed(message):
-    """Each input made the pre-issue-12 implementation (tests/_lemma2_reference.py) raise a
+    """Each input made the pre-issue-12 implementation (tests/_lemma2_prerewrite_snapshot.py) raise a
     RuntimeError with that message under the numpy/scipy of 2026-12-01; whether it still does
     depends on the installed LAPACK's rounding at these extreme scales (with numpy 2.4.6 /
     scipy 1.17.1 the last one returns a design), so only today's implementation is checked:

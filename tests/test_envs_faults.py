@@ -11,8 +11,8 @@ import pytest
 import dobs_envs  # noqa: F401
 from dobs_envs import registry, tracking_lossy_v0, tracking_v0
 from dobs_envs.envs import TrackingEnv
-from dobs_envs.envs.fault_step_kernel import advance_batch_faulted
-from dobs_envs.envs.numpy_advance import advance_reference_faulted
+from dobs_envs.envs.numpy_advance import advance_reference
+from dobs_envs.envs.step_kernel import advance_batch
 from dobs_envs.envs.tracking import TRACKING_LOSSY_FAULTS
 from dobs_envs.scenarios.paper import ne2
 from dobs_envs.sim.fault_state import FaultState
@@ -32,7 +32,7 @@ SETTINGS = {
 
 @pytest.mark.parametrize("setting", list(SETTINGS))
 def test_compiled_step_matches_the_numpy_reference(setting):
-    """advance_batch_faulted vs advance_reference_faulted from the same core state at every step of a 12-step
+    """advance_batch vs advance_reference with faults, from the same core state at every step of a 12-step
     run of 3 copies: masks, discrete fault state and float32 observations exactly; features, rewards and the
     continuous fault state to 1e-12 relative (the simulation's rounding, ``tests/test_fault_kernel.py``)."""
     core = TrackingEnv.make_core(3, faults=SETTINGS[setting], observation="full", obs_dtype="float64")
@@ -41,11 +41,13 @@ def test_compiled_step_matches_the_numpy_reference(setting):
     for k in range(12):
         u = 5 * rng.normal(size=(3, core.n_inputs))
         a, b = core.kernel_arguments(), core.kernel_arguments()
-        assert advance_batch_faulted(u=u, **a) == -1
-        assert advance_reference_faulted(u=u, **b) == -1
-        for x, y in zip(a["rx"], b["rx"]):
+        assert advance_batch(u=u, **a) == -1
+        assert advance_reference(u=u, **b) == -1
+        _, fs_a, rx_a, _ = a["fault"]
+        _, fs_b, rx_b, _ = b["fault"]
+        for x, y in zip(rx_a, rx_b):
             np.testing.assert_array_equal(x, y)
-        for name, x, y in zip(FaultState._fields, a["fs"], b["fs"]):
+        for name, x, y in zip(FaultState._fields, fs_a, fs_b):
             if x.dtype.kind in "biu" or name == "noise":
                 np.testing.assert_array_equal(x, y, err_msg=name)
             else:

@@ -1,6 +1,6 @@
 """The compiled faulted control period against its numpy reference (issue 23, phase 2).
 
-:func:`~dobs_envs.sim.fault_kernel.control_period_faulted_compiled` must do what
+:func:`~dobs_envs.sim.period_kernel.control_period_faulted_compiled` must do what
 :func:`~dobs_envs.sim.numpy_step.control_period_faulted_numpy` specifies: every discrete quantity
 (period counter, active graph, burst states, measurement noise, the period's deliveries, the C-O
 bookkeeping) bitwise, the continuous state to the rounding of the two ways of summing (the same
@@ -14,7 +14,8 @@ import pytest
 
 from dobs_envs.scenarios.paper import ne2
 from dobs_envs.sim import fault_rng, fault_state as fstate
-from dobs_envs.sim.fault_kernel import co_link_compiled, control_period_faulted_compiled
+from dobs_envs.sim.fault_kernel import co_link_compiled
+from dobs_envs.sim.period_kernel import control_period_faulted_compiled
 from dobs_envs.sim.fault_state import FaultState, co_link_numpy, fault_args, faulted_estimates, init_fault_state
 from dobs_envs.sim.faults import Faults
 from dobs_envs.sim.numpy_step import control_period_faulted_numpy
@@ -202,7 +203,8 @@ def test_period_draws_compiled_match_numpy(case):
 
 
 def test_fault_state_tuple_order():
-    """The kernels unpack the fault state positionally: the declaration order they assume."""
+    """Compiled code receives the fault state as a plain tuple in declaration order and names it
+    (``FaultState(*fs)``): the order the Python side passes (``tuple(fs)``) is the declaration's."""
     from dobs_envs.sim.fault_kernel import FAULT_STATE_FIELDS
 
     assert FAULT_STATE_FIELDS == ("seed", "period", "received", "snapshots", "bad", "graph", "noise", "co_sent",

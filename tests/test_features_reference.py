@@ -30,8 +30,8 @@ def _both(core, SF, SI, rows):
     for fn in (write_features, write_features_reference):
         Wk, obs = W.copy(), np.zeros((B, core.n_agents, core.obs_dim))
         scal = np.zeros((3, B)), np.zeros(B, bool)
-        fn(s.x, s.z, s.x_r, s.gamma, s.gamma_s, s.v, s.t, Wk, SF, SI, True, obs, rows, scal[0][0], scal[0][1],
-           scal[0][2], scal[1])
+        fn(rows, (s.t, s.x, s.z, s.gamma, s.gamma_s, s.v, s.x_r), Wk, obs, SF, SI, True,
+           (scal[0][0], scal[0][1], scal[0][2], scal[1]))
         res.append((Wk, obs, scal[0], scal[1]))
     return res
 

@@ -3,9 +3,11 @@
 The step-6 unobservable subspace is now one Householder/SVD staircase pass
 (:func:`~dobs_envs.linalg.subspaces.observability_staircase`) whose split is
 reused for J_2, instead of up to r + 1 full SVDs repeated in two places. The
-results must agree with the implementation before issue 12 (frozen in
-``tests/_lemma2_reference.py``) and with the independent geometric
-characterisation (``tests/test_maximality.py`` runs that comparison).
+results must agree with the implementation before issue 12 (a regression snapshot,
+``tests/_lemma2_prerewrite_snapshot.py``, sharing most of its lines with the package: agreement
+with it proves no correctness), satisfy Lemma 2's conditions checked here from the arrays
+(:func:`assert_lemma2_conditions`), and agree with the independent geometric characterisation
+(``tests/test_maximality.py`` runs that comparison).
 
 Tolerances: subspaces are compared by projector distance 1e-8 (both sides
 build orthonormal bases from SVDs/Householder/Schur of O(1) matrices, errors
@@ -25,8 +27,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from _lemma2_reference import _unobservable_subspace as reference_unobservable
-from _lemma2_reference import strong_detectability as reference_strong_detectability
+from _lemma2_prerewrite_snapshot import _unobservable_subspace as reference_unobservable
+from _lemma2_prerewrite_snapshot import strong_detectability as reference_strong_detectability
 from dobs_envs.design.lemma2 import strong_detectability
 from dobs_envs.linalg.subspaces import observability_staircase, projector_distance
 from test_lemma2 import mixed_system, ne2_data, random_system, systems
@@ -40,8 +42,30 @@ def _observer_blocks(res):
     return T @ res.E @ T.T, T @ res.F, T @ res.G
 
 
+def assert_lemma2_conditions(A, B, C, res):
+    """Lemma 2's conditions on a result, computed here from the arrays (no package helper): ``T_d``
+    orthonormal, ``N = T_d^T - G C`` with ``N B = 0`` and ``N A - E N - F C = 0``, ``E`` Hurwitz, or
+    ``E = 0`` with ``N = 0`` and ``F = 0``. Tolerances: 1e-8 relative to the products' sizes (the
+    rounding of O(1) SVD/Schur bases is ~1e-15 of them; a wrong design leaves O(1) residuals)."""
+    T, E, F, G = res.T_d, res.E, res.F, res.G
+    d = T.shape[1]
+    assert T.shape == (A.shape[0], d) and E.shape == (d, d) and F.shape == G.shape == (d, C.shape[0])
+    if d == 0:
+        return
+    assert np.abs(T.T @ T - np.eye(d)).max() <= 1e-10
+    N = T.T - G @ C
+    nrm = np.linalg.norm
+    assert nrm(N @ B) <= 1e-8 * (1.0 + nrm(N) * nrm(B))
+    assert nrm(N @ A - E @ N - F @ C) <= 1e-8 * (1.0 + nrm(N) * nrm(A) + nrm(E) * nrm(N) + nrm(F) * nrm(C))
+    if not E.any():
+        assert nrm(N) <= 1e-8 * (1.0 + nrm(G) * nrm(C)) and not F.any()
+    else:
+        assert np.linalg.eigvals(E).real.max() < 0.0
+
+
 def assert_same_design(A, B, C):
     new = strong_detectability(A, B, C)
+    assert_lemma2_conditions(A, B, C, new)
     old = reference_strong_detectability(A, B, C)
     assert new.delta == old.delta
     assert projector_distance(new.T_d, old.T_d) <= SUB_TOL

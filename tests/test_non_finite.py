@@ -98,8 +98,8 @@ def test_kernel_finiteness_flag(field):
             W = np.zeros((1, L.size + core.n_nodes + core.n_inputs))
             obs = np.zeros((1, core.n_agents, core.obs_dim))
             fin = np.zeros(1, bool)
-            fn(state.x, state.z, state.x_r, state.gamma, state.gamma_s, state.v, state.t, W, *_static_nr(core),
-               False, obs, np.array([0]), np.zeros(1), np.zeros(1), np.zeros(1), fin)
+            fn(np.array([0]), (state.t, state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r), W, obs,
+               *_static_nr(core), False, (np.zeros(1), np.zeros(1), np.zeros(1), fin))
             res.append(bool(fin[0]))
         return res
 

@@ -66,11 +66,10 @@ from ..sim.fault_state import fault_args, init_fault_state
 from ..sim.kernel_args import StateArrays
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
-from .features import pack_static, write_features
+from .features import fault_features, pack_static, write_features
 from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions, check_state_bound, state_bound_limit
 from ..sim.period_kernel import TILE
-from .fault_step_kernel import advance_batch_faulted, advance_range_faulted, fault_features
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
                           advance_batch, advance_range, first_non_finite)
 
@@ -497,11 +496,11 @@ class EnvCore:
         return self.observations
 
     def _write_features(self, rows) -> None:
-        write_features(self._x, self._z, self._xr, self._g, self._gs, self._v, self._t, self._W, self._SF, self._SI,
-                       self.has_reference, self._obs, rows, self._cost, self._err, self._xn, self._fin)
+        write_features(rows, self._state, self._W, self._obs, self._SF, self._SI, self.has_reference,
+                       (self._cost, self._err, self._xn, self._fin))
         if self.faults is not None:
-            fault_features(rows, self._state, self._W, self._obs, self._SF, self._SI, *self._FP, self._fs, self._rx,
-                           self._fconsts)
+            fault_features(rows, self._state, self._W, self._obs, self._SF, self._SI, self.has_reference,
+                           (self._FP, self._fs, self._rx, self._fconsts))
 
     # ------------------------------------------------------------------ step
     def advance(self, u) -> StepResult:
@@ -521,22 +520,20 @@ class EnvCore:
             u = np.ascontiguousarray(u, dtype=np.float64)
         if u.shape != (self.num_envs, self.n_inputs):
             raise ValueError(f"u must have shape ({self.num_envs}, {self.n_inputs}) (copies, inputs), got {u.shape}")
-        args = (self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI, self._consts)
-        kbatch, krange = advance_batch, advance_range
-        if self.faults is not None:
-            args += (self._FP, self._fs, self._rx, self._fconsts)
-            kbatch, krange = advance_batch_faulted, advance_range_faulted
+        fault = None if self.faults is None else (self._FP, self._fs, self._rx, self._fconsts)
         if len(self.ranges) == 1:
-            bad = kbatch(*args)
+            bad = advance_batch(self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI,
+                                self._consts, fault)
         else:
+            args = (self._state, self._W, self._obs, self._outs, self._sig, self._ka, self._SF, self._SI, self._consts)
             bad = first_non_finite(u)
             if bad < 0:
                 if self._pool is None:
                     from concurrent.futures import ThreadPoolExecutor
 
                     self._pool = ThreadPoolExecutor(len(self.ranges) - 1, thread_name_prefix="dobs_envs_core")
-                futures = [self._pool.submit(krange, lo, hi, *args) for lo, hi in self.ranges[1:]]
-                krange(*self.ranges[0], *args)
+                futures = [self._pool.submit(advance_range, lo, hi, u, args, fault) for lo, hi in self.ranges[1:]]
+                advance_range(*self.ranges[0], u, args, fault)
                 for f in futures:
                     f.result()
         if bad >= 0:
@@ -566,8 +563,8 @@ class EnvCore:
         out = {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
                "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF, "SI": self._SI,
                "consts": self._consts}
-        if self.faults is not None:  # the arguments of advance_batch_faulted / advance_reference_faulted
-            out.update(fp=self._FP, fs=cp(self._fs), rx=cp(self._rx), fconsts=self._fconsts)
+        if self.faults is not None:  # advance_batch's / advance_reference's fault=(fp, fs, rx, fconsts)
+            out.update(fault=(self._FP, cp(self._fs), cp(self._rx), self._fconsts))
         return out
 
     # ------------------------------------------------------------------ communication faults

@@ -24,6 +24,8 @@ from typing import NamedTuple
 
 from ..numba_cache import ensure_fresh
 from ..packing import compiled_unpack, f64, i64, pack
+from ..sim.fault_kernel import co_link_rows, delivers, loss_key, unpack_fault_args
+from ..sim.fault_state import FaultArgs, FaultState
 from ..sim.kernel_args import StateArrays
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
@@ -39,7 +41,8 @@ except ImportError:  # pragma: no cover
 
     _njit_inline = _njit
 
-__all__ = ["FeatureArgs", "pack_static", "unpack_static", "features_row", "write_features", "flops_per_row"]
+__all__ = ["FeatureArgs", "Offsets", "P_SIZES", "offsets", "EnvFault", "env_fault", "pack_static", "unpack_static", "features_row", "write_features",
+           "fault_rows", "fault_features", "flops_per_row"]
 
 
 class FeatureArgs(NamedTuple):
@@ -54,6 +57,32 @@ class FeatureArgs(NamedTuple):
     R: f64("m m")
     off: i64("o")  # offsets of FeatureLayout.offsets: (y, xhat, x, x_r, gamma, gamma_s, v, r, time, e), then p_i
     idx: i64("k")  # the flattened (K, D) padded gather
+
+
+class Offsets(NamedTuple):
+    """Where each block of the feature vector starts (the first entries of ``FeatureArgs.off``, in the order
+    of :meth:`~dobs_envs.envs.observation.FeatureLayout.offsets`), read by name (:func:`offsets`)."""
+
+    y: int
+    xhat: int
+    x: int
+    x_r: int
+    gamma: int
+    gamma_s: int
+    v: int
+    r: int
+    time: int
+    e: int
+
+
+#: where the output sizes ``p_i`` start in ``FeatureArgs.off`` (after the :class:`Offsets`)
+P_SIZES = len(Offsets._fields)
+
+
+@_njit_inline
+def offsets(off):
+    """The :class:`Offsets` of ``FeatureArgs.off`` (its first :data:`P_SIZES` entries)."""
+    return Offsets(off[0], off[1], off[2], off[3], off[4], off[5], off[6], off[7], off[8], off[9])
 
 
 def pack_static(C, G, ref, Q, R, off, idx, F):
@@ -75,13 +104,14 @@ unpack_static = compiled_unpack(FeatureArgs, _njit, "unpack_static")
 
 
 @_njit_inline
-def features_row(b, st, W, fa, has_ref, obs2, y):
+def features_row(b, st, W, fa, has_ref, obs2, y, noise):
     """Copy ``b`` of the state ``st`` (:class:`~dobs_envs.sim.kernel_args.StateArrays`): fill ``W[b]``
     and ``obs2[b] (K * D)`` with the constants ``fa`` (:class:`FeatureArgs`); return
     ``(cost, ||e||, ||x||, finite)`` (``y (p,)`` is scratch).
 
     Same arithmetic order as :func:`dobs_envs.sim.estimates`: ``y_i = C_i x``,
-    ``xhat_i = z_i + G_i y_i``. ``finite`` is accumulated as ``sum(value * 0)``, which is 0
+    ``xhat_i = z_i + G_i y_i``; with communication faults and measurement noise, ``noise (B, N, p)`` the
+    held noise of the period, ``y_i = C_i x + n_i`` (the draw the observer node uses; ``None``: no noise). ``finite`` is accumulated as ``sum(value * 0)``, which is 0
     exactly when every state entry is finite (``inf * 0`` and ``NaN * 0`` are NaN).
     """
     x, z, x_r, gamma, gamma_s, v, t = st.x, st.z, st.x_r, st.gamma, st.gamma_s, st.v, st.t
@@ -90,15 +120,19 @@ def features_row(b, st, W, fa, has_ref, obs2, y):
     p = C.shape[1]
     m = R.shape[0]
     nonfin = 0.0
-    oy = off[0]
-    oxh = off[1]
+    o = offsets(off)
+    oy = o.y
+    oxh = o.xhat
     for i in range(N):
         for q in range(p):
             s = 0.0
             for l in range(n):
                 s += C[i, q, l] * x[b, l]
-            y[q] = s
-        pi = off[10 + i]
+            if noise is None:
+                y[q] = s
+            else:
+                y[q] = s + noise[b, i, q]
+        pi = off[P_SIZES + i]
         for q in range(pi):
             W[b, oy + q] = y[q]
         oy += pi
@@ -119,26 +153,26 @@ def features_row(b, st, W, fa, has_ref, obs2, y):
     for k in range(n):
         xk = x[b, k]
         xrk = x_r[b, k]
-        W[b, off[2] + k] = xk
-        W[b, off[3] + k] = xrk
+        W[b, o.x + k] = xk
+        W[b, o.x_r + k] = xrk
         xx += xk * xk
         nonfin += xk * 0.0 + xrk * 0.0
         e = xk - xrk if has_ref else xk
-        W[b, off[9] + k] = e
+        W[b, o.e + k] = e
         ee += e * e
     for i in range(N):
-        W[b, off[4] + i] = gamma[b, i]
-        W[b, off[5] + i] = gamma_s[b, i]
+        W[b, o.gamma + i] = gamma[b, i]
+        W[b, o.gamma_s + i] = gamma_s[b, i]
         nonfin += gamma[b, i] * 0.0 + gamma_s[b, i] * 0.0
     for j in range(v.shape[1]):
-        W[b, off[6] + j] = v[b, j]
+        W[b, o.v + j] = v[b, j]
         nonfin += v[b, j] * 0.0
     tb = t[b]
     if has_ref:
         for j in range(ref.shape[1]):
-            W[b, off[7] + j] = ref[0, j] * np.sin(ref[1, j] * tb + ref[2, j])
-    W[b, off[8]] = tb
-    oe = off[9]
+            W[b, o.r + j] = ref[0, j] * np.sin(ref[1, j] * tb + ref[2, j])
+    W[b, o.time] = tb
+    oe = o.e
     cost = 0.0
     for k in range(n):
         s = 0.0
@@ -157,33 +191,142 @@ def features_row(b, st, W, fa, has_ref, obs2, y):
 
 
 @_njit
-def write_features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, obs, rows, cost, err, xnorm, finite):
+def write_features(rows, state, W, obs, SF, SI, has_ref, out):
     """Features, observations and cost of the copies ``rows`` (see module docstring).
 
     Parameters
     ----------
-    x : (B, n); z : (B, N, n); x_r : (B, n); gamma, gamma_s : (B, N); v : (B, m_v); t : (B,)
-        simulation arrays (read).
+    rows : (k,) int copies to process.
+    state : the plain tuple of :class:`~dobs_envs.sim.kernel_args.StateArrays`' fields
+        ``(t (B,), x (B, n), z (B, N, n), gamma (B, N), gamma_s (B, N), v (B, m_v), x_r (B, n))`` (read).
     W : (B, F + N + m) work rows ``[f | est | u]``, written (``u`` is read; the constant
         0/1 entries of ``f`` are left as they are).
+    obs : (B, K, D) padded observations (float32 or float64), written.
     SF, SI : static arrays of :func:`pack_static`.
     has_ref : bool, tracking task (reference command and ``e = x - x_r``).
-    obs : (B, K, D) padded observations (float32 or float64), written.
-    rows : (k,) int copies to process.
-    cost, err, xnorm : (B,) float64, finite : (B,) bool, written at ``rows``:
+    out : ``(cost, err, xnorm, finite)``, (B,) float64 x 3 and (B,) bool, written at ``rows``:
         ``e'Qe + u'Ru``, ``||e||``, ``||x||`` and the finiteness flag.
     """
     fa = unpack_static(SF, SI)
-    st = StateArrays(t, x, z, gamma, gamma_s, v, x_r)
+    st = StateArrays(*state)
+    cost, err, xnorm, finite = out
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
     y = np.empty(fa.C.shape[1])
     for r in range(rows.shape[0]):
         b = rows[r]
-        c, e, xn, fin = features_row(b, st, W, fa, has_ref, obs2, y)
+        c, e, xn, fin = features_row(b, st, W, fa, has_ref, obs2, y, None)
         cost[b] = c
         err[b] = e
         xnorm[b] = xn
         finite[b] = fin
+
+
+class EnvFault(NamedTuple):
+    """The communication faults of an environment step in compiled code (:func:`env_fault`)."""
+
+    args: FaultArgs  # unpacked constants
+    state: FaultState  # the copies' fault state (updated)
+    co_rx: np.ndarray  # (B, K) bool: the C-O packet of each controller arrived at the boundary (written)
+    oo_rx: np.ndarray  # (B, E) bool: link e's copy at the boundary is this boundary's broadcast (written)
+    co_nodes: np.ndarray  # (K,) the node each controller reads over its C-O link
+    offsets: np.ndarray  # (4,) offsets of xhat_rx, nbr_rx, co_rx, oo_rx in the feature vector
+
+
+@_njit
+def env_fault(fault):
+    """:class:`EnvFault` of the plain tuple ``(fp, fs, rx, fconsts)`` an environment passes: ``fp = (FF, FI)``
+    the packed :class:`~dobs_envs.sim.fault_state.FaultArgs`, ``fs`` the fault-state tuple (FaultState
+    order), ``rx = (co_rx, oo_rx)``, ``fconsts = (co_nodes, offsets)`` (plain tuples: cheaper to dispatch)."""
+    fp, fs, rx, fconsts = fault
+    FF, FI = fp
+    co_rx, oo_rx = rx
+    co_nodes, offsets = fconsts
+    return EnvFault(unpack_fault_args(FF, FI), FaultState(*fs), co_rx, oo_rx, co_nodes, offsets)
+
+
+@_njit
+def fault_rows(lo, hi, st, W, obs2, fa, fault, link):
+    """What the agents observe at a boundary with faults, copies ``lo .. hi-1``, after :func:`features_row`
+    (with the held noise: ``y_i = C_i x + n_i``, ``xhat_i = z_i + Gbar_i y_i`` and the estimation errors
+    are those of the noisy measurement):
+
+    - the C-O link (:func:`~dobs_envs.sim.fault_kernel.co_link_rows`; ``link`` False at a reset: every
+      controller holds the ``t = 0`` estimate, received): controller ``k`` reads the estimate it holds,
+      ``xhat_rx[k]``; ``co_rx[k]`` is 1 when this boundary's packet arrived;
+    - the O-O copies node ``i`` holds at the boundary instant, ``nbr_rx[e]`` for each link ``e = (j -> i)``:
+      the value received at the boundary's own broadcast when one is due (the boundary is an exchange
+      instant and the link delivers in the starting period) -- ``oo_rx[e] = 1`` -- else the value held
+      from an earlier broadcast (``oo_rx[e] = 0``, stale). Nothing in the fault state is changed by this
+      read (the period's kernel makes the same broadcast at its first Euler step);
+    - then the observation gathers again.
+
+    ``fa`` :class:`FeatureArgs`; ``fault`` :class:`EnvFault`. One call for a range of copies, in two passes
+    (the C-O links, then held copies, masks and the gathers); each copy's values are those of its own row.
+    """
+    ff, fs = fault.args, fault.state
+    co_rx, oo_rx, co_nodes, foff = fault.co_rx, fault.oo_rx, fault.co_nodes, fault.offsets
+    o_xhat_rx, o_nbr_rx, o_co_rx, o_oo_rx = foff[0], foff[1], foff[2], foff[3]
+    seed_a, period_a, received_a, snapshots_a, bad_a, graph_a = fs.seed, fs.period, fs.received, fs.snapshots, fs.bad, fs.graph
+    co_held_a = fs.co_held
+    idx = fa.idx
+    n = st.z.shape[2]
+    K = co_nodes.shape[0]
+    sender = ff.sender
+    E = sender.shape[0]
+    oxh = offsets(fa.off).xhat
+    # the C-O links (the estimates xhat_i of the feature vector: W[b, oxh + i n ...])
+    if link:
+        co_link_rows(lo, hi, W, 0, oxh, co_nodes, ff, fs, co_rx)
+    else:
+        for b in range(lo, hi):
+            for l in range(K):
+                co_rx[b, l] = True
+    # the O-O copies held at the boundary instant (a broadcast due now delivers on the starting period's links)
+    S, M, lag, ring, continuous = ff.substeps, ff.exchange_steps, ff.lag, ff.ring, ff.continuous
+    for b in range(lo, hi):
+        for l in range(K):
+            for c in range(n):
+                W[b, o_xhat_rx + l * n + c] = co_held_a[b, l, c]
+            W[b, o_co_rx + l] = 1.0 if co_rx[b, l] else 0.0
+        k = period_a[b]
+        s_ = k * S
+        due = continuous or s_ % M == 0
+        old = (s_ // M - lag) % ring
+        key = loss_key(seed_a, b, k)
+        g = graph_a[b]
+        for e in range(E):
+            fresh = due and delivers(b, e, ff, key, bad_a, g)
+            oo_rx[b, e] = fresh
+            W[b, o_oo_rx + e] = 1.0 if fresh else 0.0
+            js = sender[e]
+            for c in range(n):
+                if not fresh:
+                    val = received_a[b, e, c]
+                elif lag > 0:
+                    val = snapshots_a[b, old, js, c]
+                else:
+                    val = W[b, oxh + js * n + c]
+                W[b, o_nbr_rx + e * n + c] = val
+        for j in range(idx.shape[0]):
+            obs2[b, j] = W[b, idx[j]]
+
+
+@_njit
+def fault_features(rows, state, W, obs, SF, SI, has_ref, fault):
+    """The features with the held noise and :func:`fault_rows` (without the C-O link) of the copies ``rows``,
+    after :func:`write_features` (reset and ``set_sim_state``); ``fault`` the plain tuple of
+    :func:`env_fault`."""
+    fa = unpack_static(SF, SI)
+    ef = env_fault(fault)
+    st = StateArrays(*state)
+    obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
+    y = np.empty(fa.C.shape[1])
+    noisy = ef.args.noise_std > 0.0
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        if noisy:
+            features_row(b, st, W, fa, has_ref, obs2, y, ef.state.noise)
+        fault_rows(b, b + 1, st, W, obs2, fa, ef, False)
 
 
 def flops_per_row(core) -> int:

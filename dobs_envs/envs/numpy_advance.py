@@ -7,11 +7,10 @@ tested against (``tests/test_core.py``): the simulation is
 :func:`dobs_envs.envs.numpy_features.write_features_reference`, and the reward and
 termination rules are written out below, vectorised over the copies.
 
-:func:`advance_reference_faulted` is the same for
-:func:`dobs_envs.envs.fault_step_kernel.advance_batch_faulted` (communication faults): the simulation
+With ``fault`` (communication faults, the same argument as the compiled step's) the simulation
 is :func:`dobs_envs.sim.numpy_step.control_period_faulted_numpy`, and after the features the
-agents' received quantities are written (:func:`_fault_observations`, the module doc of
-:mod:`dobs_envs.envs.fault_step_kernel` for what they are).
+agents' received quantities are written (:func:`_fault_observations`; what they are:
+:func:`dobs_envs.envs.features.fault_rows`).
 """
 from __future__ import annotations
 
@@ -28,32 +27,25 @@ from .features import FeatureArgs
 from .numpy_features import write_features_reference
 from .step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts
 
-__all__ = ["advance_reference", "advance_reference_faulted"]
+__all__ = ["advance_reference"]
 
 
-def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts):
-    """Numpy counterpart of :func:`~dobs_envs.envs.step_kernel.advance_batch` (same arguments, same effects)."""
+def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
+    """Numpy counterpart of :func:`~dobs_envs.envs.step_kernel.advance_batch` (same arguments, same effects:
+    with ``fault = (fp, fs, rx, fconsts)``, ``fs`` and ``rx`` updated in place)."""
     bad = np.flatnonzero(~np.all(np.isfinite(u), axis=1))
     if bad.size:
         return int(bad[0])
+    if fault is not None:
+        fp, fs, rx, fconsts = fault
+        fault = (unpack(FaultArgs, *fp), fs, rx, fconsts)
     with np.errstate(all="ignore"):
-        _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts)
-    return -1
-
-
-def advance_reference_faulted(state, W, obs, outs, u, sig, ka, SF, SI, consts, fp, fs, rx, fconsts):
-    """Numpy counterpart of :func:`~dobs_envs.envs.fault_step_kernel.advance_batch_faulted` (same arguments,
-    same effects: ``fs`` and ``rx`` updated in place)."""
-    bad = np.flatnonzero(~np.all(np.isfinite(u), axis=1))
-    if bad.size:
-        return int(bad[0])
-    with np.errstate(all="ignore"):
-        _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, (unpack(FaultArgs, *fp), fs, rx, fconsts))
+        _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault)
     return -1
 
 
 def _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link: bool):
-    """What the agents receive at the boundary (module doc of :mod:`dobs_envs.envs.fault_step_kernel`): noisy
+    """What the agents receive at the boundary (:func:`dobs_envs.envs.features.fault_rows`): noisy
     ``y``/``xhat``/estimation errors into ``W``, the C-O link (``link``), the O-O copies held at the boundary
     instant, the masks ``rx``; then the observation gathers. ``fs`` a :class:`FaultState` (its C-O buffers are
     the arrays of the caller's tuple); returns it."""
@@ -135,8 +127,7 @@ def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults=None):
     t += period
     cycles += 1
     rows = np.arange(B)
-    write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, c.has_ref, obs, rows, cost, err, xnorm,
-                             finite)
+    write_features_reference(rows, state, W, obs, SF, SI, c.has_ref, (cost, err, xnorm, finite))
     if faults is not None:
         _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link=True)
     # 5: reward and termination

@@ -27,24 +27,25 @@ from .features import FeatureArgs
 __all__ = ["write_features_reference"]
 
 
-def write_features_reference(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, obs, rows, cost, err, xnorm,
-                             finite):
+def write_features_reference(rows, state, W, obs, SF, SI, has_ref, out):
     """Numpy counterpart of :func:`~dobs_envs.envs.features.write_features`.
 
     Parameters
     ----------
-    x : (B, n) plant states; z : (B, N, n) observer states; x_r : (B, n) reference-model states;
-    gamma, gamma_s : (B, N) adaptive gains; v : (B, m_v) unknown inputs; t : (B,) times.
+    rows : (k,) int copies to process.
+    state : ``(t (B,), x (B, n), z (B, N, n), gamma, gamma_s (B, N), v (B, m_v), x_r (B, n))``, the fields of
+        :class:`~dobs_envs.sim.kernel_args.StateArrays` (read).
     W : (B, F + N + m) work rows ``[f | est | u]``, written in place at ``rows`` (``u``, the
         applied input, is read; the constant 0/1 entries of ``f`` are left as they are).
+    obs : (B, K, D) padded observations, written at ``rows`` (cast to its dtype).
     SF, SI : static arrays of :func:`~dobs_envs.envs.features.pack_static`.
     has_ref : bool, tracking task (reference command and ``e = x - x_r``).
-    obs : (B, K, D) padded observations, written at ``rows`` (cast to its dtype).
-    rows : (k,) int copies to process.
-    cost, err, xnorm : (B,) float64 and finite : (B,) bool, written at ``rows``:
+    out : ``(cost, err, xnorm, finite)``, (B,) float64 x 3 and (B,) bool, written at ``rows``:
         ``e'Qe + u'Ru``, ``||e||``, ``||x||``, and whether every entry of the copy's
         ``x``, ``x_r``, ``z``, ``gamma``, ``gamma_s``, ``v`` is finite.
     """
+    t, x, z, gamma, gamma_s, v, x_r = state
+    cost, err, xnorm, finite = out
     with np.errstate(all="ignore"):  # IEEE semantics, silently (as the compiled kernel)
         _features(x, z, x_r, gamma, gamma_s, v, t, W, SF, SI, has_ref, obs, np.asarray(rows), cost, err, xnorm,
                   finite)

@@ -1,4 +1,4 @@
-"""One environment step of every copy of a batch in one compiled call.
+"""One environment step of every copy of a batch in one compiled call, with or without communication faults.
 
 :func:`advance_batch` does, for every copy ``b`` (:func:`advance_range` for a range of copies,
 which threads may run concurrently on disjoint ranges: it releases the GIL):
@@ -18,6 +18,14 @@ which threads may run concurrently on disjoint ranges: it releases the GIL):
    observations and feature vector are cleaned (NaN -> 0, +-inf -> +-largest finite value of
    their dtype); otherwise truncation (reason 3) when ``cycles >= max_cycles >= 0``.
 
+Communication faults (the core's ``faults`` option, issue 23): the argument ``fault`` is ``None`` (numba
+compiles the step without any fault code: the ``if fault is None:`` branches are pruned per
+specialisation) or the plain tuple ``(fp, fs, rx, fconsts)`` of :func:`~dobs_envs.envs.features.env_fault`.
+Then step 3 is the faulted control period (:class:`~dobs_envs.sim.fault_kernel.FaultPeriod`), step 4
+computes the features with the period's held measurement noise (``y_i = C_i x + n_i``, the draw the
+observer node uses) and, per chunk of :data:`ROWS_CHUNK` copies, what the agents observe at the boundary
+(:func:`~dobs_envs.envs.features.fault_rows`: the C-O link, the O-O copies held, the masks), before step 5.
+
 Nothing is modified when some input is not finite: the kernel returns the first such copy
 (else -1). The readable numpy reference is :func:`dobs_envs.envs.numpy_advance.advance_reference`.
 """
@@ -28,9 +36,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ..numba_cache import ensure_fresh
-from ..sim.period_kernel import advance_rows, unpack_kernel_args
 from ..sim.kernel_args import StateArrays
-from .features import features_row, unpack_static
+from ..sim.period_kernel import PeriodArrays, advance_rows, unpack_kernel_args
+from ..sim.fault_kernel import FaultPeriod
+from .features import env_fault, fault_rows, features_row, offsets, unpack_static
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -45,8 +54,12 @@ except ImportError:  # pragma: no cover
 
     _njit_inline = _njit
 
-__all__ = ["StepConsts", "advance_batch", "advance_range", "apply_inputs", "finish_row", "first_non_finite", "REASON_NONE", "REASON_STATE_BOUND",
-           "REASON_NON_FINITE", "REASON_HORIZON"]
+__all__ = ["StepConsts", "StepOutputs", "advance_batch", "advance_range", "apply_inputs", "finish_row",
+           "first_non_finite", "ROWS_CHUNK", "REASON_NONE", "REASON_STATE_BOUND", "REASON_NON_FINITE", "REASON_HORIZON"]
+
+#: copies whose features, faulted observations and step results are written together by
+#: :func:`advance_range` with faults (their rows stay in the cache between the three passes)
+ROWS_CHUNK = 64
 
 #: reason codes (int8) of a step
 REASON_NONE, REASON_STATE_BOUND, REASON_NON_FINITE, REASON_HORIZON = 0, 1, 2, 3
@@ -71,6 +84,28 @@ class StepConsts(NamedTuple):
     reward_code: int  # 0 quadratic, 1 log, 2 sqrt
     termination_penalty: bool  # charge bound_step_cost for every remaining step on termination
     random_v: bool  # the "random" disturbance (v set from the per-copy signal at each period's start)
+
+
+class StepOutputs(NamedTuple):
+    """The step's per-copy outputs by name: the rows of ``outs = (outf (4, B), outb (3, B), reason, cycles)``
+    (:func:`step_outputs`, the one place that knows the row order)."""
+
+    reward: np.ndarray  # (B,) float64
+    cost: np.ndarray  # (B,) stage cost e'Qe + u'Ru
+    err: np.ndarray  # (B,) ||e||
+    xnorm: np.ndarray  # (B,) ||x||
+    finite: np.ndarray  # (B,) bool: the whole simulated state is finite
+    terminated: np.ndarray  # (B,) bool
+    truncated: np.ndarray  # (B,) bool
+    reason: np.ndarray  # (B,) int8 reason codes
+    cycles: np.ndarray  # (B,) int64 control steps since the reset
+
+
+@_njit_inline
+def step_outputs(outs):
+    """:class:`StepOutputs` of the buffers ``outs = (outf, outb, reason, cycles)`` (views)."""
+    outf, outb, reason, cycles = outs
+    return StepOutputs(outf[0], outf[1], outf[2], outf[3], outb[0], outb[1], outb[2], reason, cycles)
 
 
 @_njit
@@ -124,11 +159,11 @@ def apply_inputs(lo, hi, t, v, W, u, sig, ou, c):
 
 
 @_njit_inline
-def finish_row(b, cb, xn, fin, x, W, F, obs2, outs, c):
+def finish_row(b, cb, xn, fin, x, W, F, obs2, o, c):
     """Step 5 of copy ``b`` from its stage cost ``cb``, ``||x||`` ``xn`` and finiteness ``fin``: reward,
-    termination (reason codes), truncation, cleaning of a terminal copy's observations and features."""
-    outf, outb, reason, cycles = outs
-    reward, term, trunc = outf[0], outb[1], outb[2]
+    termination (reason codes), truncation, cleaning of a terminal copy's observations and features
+    (``o`` the :class:`StepOutputs`, ``c`` the :class:`StepConsts`)."""
+    reward, term, trunc, reason, cycles = o.reward, o.terminated, o.truncated, o.reason, o.cycles
     if c.reward_code == 1:  # log
         shaped = np.log1p(cb / c.log_c0) if cb < np.inf else np.inf
     elif c.reward_code == 2:  # sqrt
@@ -159,43 +194,73 @@ def finish_row(b, cb, xn, fin, x, W, F, obs2, outs, c):
 
 
 @_njit
-def advance_range(lo, hi, state, W, obs, outs, u, sig, ka, SF, SI, consts):
+def advance_range(lo, hi, u, args, fault):
     """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
-    releases the GIL: threads may advance disjoint ranges of one batch concurrently."""
-    KF, KI = ka
+    releases the GIL: threads may advance disjoint ranges of one batch concurrently. ``args`` the plain
+    tuple ``(state, W, obs, outs, sig, ka, SF, SI, consts)`` (:func:`advance_batch`'s arguments but ``u``),
+    ``fault`` None or the faults' plain tuple (module doc)."""
+    state, W, obs, outs, sig, kp, SF, SI, consts = args
+    KF, KI = kp
     ka = unpack_kernel_args(KF, KI)
     fa = unpack_static(SF, SI)
     c = StepConsts(*consts)
     st = StateArrays(*state)
-    t, x, z, gamma, gamma_s, v, x_r = st.t, st.x, st.z, st.gamma, st.gamma_s, st.v, st.x_r
-    outf, outb, reason, cycles = outs
-    cost, err, xnorm = outf[1], outf[2], outf[3]
-    finite = outb[0]
+    o = step_outputs(outs)
+    t, x = st.t, st.x
+    cost, err, xnorm, finite, cycles = o.cost, o.err, o.xnorm, o.finite, o.cycles
     F = fa.F
-    N = z.shape[1]
+    N = st.z.shape[1]
     m = u.shape[1]
     ou = F + N
-    o_r = fa.off[7]
+    o_r = offsets(fa.off).r
     # 1-2: applied inputs, disturbance at the period's start
-    apply_inputs(lo, hi, t, v, W, u, sig, ou, c)
+    apply_inputs(lo, hi, t, st.v, W, u, sig, ou, c)
     # 3: one control period (held input and reference command)
-    advance_rows(x, z, gamma, gamma_s, v, x_r, W[:, ou:ou + m], W[:, o_r:o_r + m], ka, lo, hi)
+    pa = PeriodArrays(x, st.z, st.gamma, st.gamma_s, st.v, st.x_r, W[:, ou:ou + m], W[:, o_r:o_r + m])
+    if fault is None:
+        advance_rows(pa, ka, lo, hi, None)
+    else:
+        ef = env_fault(fault)
+        noisy = ef.args.noise_std > 0.0
+        noise_a = ef.state.noise
+        delivered = np.empty((x.shape[0], ef.args.sender.shape[0]), dtype=np.bool_)  # the period's (not observed)
+        advance_rows(pa, ka, lo, hi, FaultPeriod(ef.args, ef.state, delivered))
     # 4-5: features, reward, termination
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
     y = np.empty(fa.C.shape[1])
-    for b in range(lo, hi):
-        t[b] = t[b] + c.period
-        cycles[b] += 1
-        cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y)
-        cost[b] = cb
-        err[b] = e
-        xnorm[b] = xn
-        finite[b] = fin
-        finish_row(b, cb, xn, fin, x, W, F, obs2, outs, c)
+    if fault is None:
+        for b in range(lo, hi):
+            t[b] = t[b] + c.period
+            cycles[b] += 1
+            cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, None)
+            cost[b] = cb
+            err[b] = e
+            xnorm[b] = xn
+            finite[b] = fin
+            finish_row(b, cb, xn, fin, x, W, F, obs2, o, c)
+    else:
+        # per chunk: features (with the held noise), the faulted observations, then reward and termination
+        # (from the stored cost, ||x|| and finiteness): per copy the order of the unfaulted step
+        for b0 in range(lo, hi, ROWS_CHUNK):
+            b1 = min(b0 + ROWS_CHUNK, hi)
+            for b in range(b0, b1):
+                t[b] = t[b] + c.period
+                cycles[b] += 1
+                if noisy:
+                    cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, noise_a)
+                else:
+                    cb, e, xn, fin = features_row(b, st, W, fa, c.has_ref, obs2, y, None)
+                cost[b] = cb
+                err[b] = e
+                xnorm[b] = xn
+                finite[b] = fin
+            fault_rows(b0, b1, st, W, obs2, fa, ef, True)
+            for b in range(b0, b1):
+                finish_row(b, cost[b], xnorm[b], finite[b], x, W, F, obs2, o, c)
 
 
 @_njit
-def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
+def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
     """One step of every copy (see module docstring), serial.
 
     Parameters
@@ -204,11 +269,13 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
         fields of :class:`~dobs_envs.sim.kernel_args.StateArrays` as a plain tuple, updated in place.
     W : (B, F + N + m) work rows ``[f | est | u]``; obs : (B, K, D) padded observations.
     outs : (outf (4, B) float64 rows reward, cost, ||e||, ||x||; outb (3, B) bool rows finite,
-        terminated, truncated; reason (B,) int8; cycles (B,) int64), written.
+        terminated, truncated; reason (B,) int8; cycles (B,) int64), written (:class:`StepOutputs`).
     u : (B, m) float64 requested inputs (read).
     sig : (3, B, m_v, L): amplitudes, frequencies, phases of the "random" disturbance.
     ka : ``SimParams.kernel_packed`` (KF, KI); SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
     consts : a plain tuple of the fields of :class:`StepConsts`, in its field order.
+    fault : None, or ``(fp, fs, rx, fconsts)`` (:func:`~dobs_envs.envs.features.env_fault`): ``fs`` and
+        ``rx`` updated.
 
     Returns
     -------
@@ -218,5 +285,9 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts):
     if bad >= 0:
         return bad
     # np.int64(0), not 0: a literal would compile a second advance_range besides the threads' (int64, int64)
-    advance_range(np.int64(0), u.shape[0], state, W, obs, outs, u, sig, ka, SF, SI, consts)
+    args = (state, W, obs, outs, sig, ka, SF, SI, consts)
+    if fault is None:  # an omitted fault: advance_range's None specialisation
+        advance_range(np.int64(0), u.shape[0], u, args, None)
+    else:
+        advance_range(np.int64(0), u.shape[0], u, args, fault)
     return -1

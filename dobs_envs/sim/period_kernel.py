@@ -1,7 +1,25 @@
-"""numba-compiled control period: the hot path of every environment.
+"""numba-compiled control period: the hot path of every environment, with or without communication faults.
 
 Same operations as :func:`.numpy_step.control_period_numpy` (see its docstring for
-the equations); the two are tested against each other.
+the equations) and, given a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` instead of ``None``,
+:func:`.numpy_step.control_period_faulted_numpy`; tested against both.
+
+One engine
+----------
+Every compiled function of a period takes the fault arguments or ``None`` (``fault``, and its work
+arrays ``fsc`` / ``ft``). numba compiles one specialisation per argument type and prunes the
+``if fault is None:`` branches before typing, so ``faults=None`` compiles to the ideal network's code
+and runs no fault code. The two specialisations differ where the numpy reference's exchange objects
+(``_IdealExchange`` / ``_FaultedExchange``) do: the degrees of the stable-step test (the active graph's),
+the held measurement noise added to ``y_i`` (eq. (localmeasure)), and the consensus term ``d_i`` of eq.
+(H_idefine): ``(L xhat)_i`` over the neighbour lists, or ``sum_{e: receiver e = i} a_e^g (xhat_i - r_e)``
+over the copies ``r_e`` node ``i`` holds, refreshed by the broadcasts (in :func:`period_copy` and
+:func:`_tile_body`: at the Euler steps ``s`` counted from the copy's reset that are multiples of
+``exchange_steps``, every delivering link takes the sender's estimate, or with ``oo_delay > 0`` the
+snapshot of ``lag`` broadcasts before from the copy's ring; the continuous exchange without delay
+refreshes them at every shortened step of a split Euler step too). The draws, the deliveries and the
+C-O link are in :mod:`.fault_kernel`; after a faulted period :func:`advance_rows` makes each copy's
+next-period draws (:func:`~dobs_envs.sim.fault_kernel.draws_rows`).
 
 Sparse rows
 -----------
@@ -68,6 +86,10 @@ Per copy: :func:`period_copy` runs the test; a tile flags every lane whose test 
 period's start with :func:`period_copy`, so a copy's result still depends on nothing but its own
 state (the unflagged lanes pass the copy's test with a margin: the same plain steps).
 
+Named state. The batch-first arrays of a period (state and held inputs) travel as one
+:class:`PeriodArrays`, the work arrays as :class:`CopyScratch` / :class:`TileState` /
+:class:`TileWork` (and the fault ones of :mod:`.fault_kernel`), all read by name.
+
 The constants arrive as one :class:`~dobs_envs.sim.kernel_args.KernelArgs` named tuple ``ka``
 (declared once in :mod:`.kernel_args`; built once per parameter set), read by name (``ka.dt``,
 ``ka.rows.E_bar``); from Python they are passed packed into two buffers
@@ -76,21 +98,24 @@ unpacks in compiled code.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..numba_cache import ensure_fresh
-from ..packing import compiled_unpack
+from ..packing import compiled_unpack, pack
+from . import fault_kernel as fk
+from .fault_state import FaultArgs, FaultState
+from .jit import FASTMATH, HAVE_NUMBA
+from .jit import njit as _njit
+from .jit import njit_inline as _njit_inline
 from .kernel_args import KernelArgs
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
-#: LLVM fast-math flags of the kernel: FMA contraction (``contract``) only. Not ``reassoc``
-#: (a copy's sums must not be reordered differently in the scalar and the tiled layout),
-#: not ``nsz`` (``0.0 + a*b`` must stay an FMA with 0, never a bare product that a following
-#: addition could contract either way), not ``nnan``/``ninf`` (NaN and inf propagate as IEEE
-#: arithmetic says: an overflowing observer yields a non-finite state the environment
-#: detects and terminates on, instead of undefined behaviour).
-FASTMATH = {"contract"}
+if HAVE_NUMBA:
+    import numba
+
 #: Copies per SIMD tile of :func:`advance_rows`, a compile-time constant (NE2, one core: 5.0 us per
 #: copy and control step at 128, 5.4 at 64; the same code with a run-time width: 5.8 at 128).
 TILE = 128
@@ -106,33 +131,85 @@ MAX_SPLIT = 4096
 #: against any rounding difference between the layouts) is recomputed by :func:`period_copy`.
 TILE_RECHECK = 0.5
 
-try:  # numba is a hard dependency, but keep the package importable without it
-    import numba
-
-    _njit = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy")
-    _njit_inline = numba.njit(cache=True, fastmath=FASTMATH, nogil=True, error_model="numpy", inline="always")
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
-
-    def _njit(f):
-        return f
-
-    _njit_inline = _njit
+__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "MAX_SPLIT", "PeriodArrays", "CopyScratch", "TileState",
+           "TileWork", "period_copy", "period_tile", "period_tile_any", "advance_rows", "unpack_kernel_args",
+           "control_period_compiled", "control_period_faulted_compiled", "flops_per_period"]
 
 
-__all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "MAX_SPLIT", "period_copy", "period_tile", "period_tile_any", "advance_rows",
-           "unpack_kernel_args",
-           "control_period_compiled", "flops_per_period"]
+class PeriodArrays(NamedTuple):
+    """The batch-first arrays of one control period: the state (updated in place) and the held inputs."""
+
+    x: np.ndarray  # (B, n) plant
+    z: np.ndarray  # (B, N, n) observer nodes
+    gamma: np.ndarray  # (B, N) adaptive gains
+    gamma_s: np.ndarray  # (B, N)
+    v: np.ndarray  # (B, m_v) exosystem
+    x_r: np.ndarray  # (B, n) reference model
+    u: np.ndarray  # (B, m) held input (read)
+    r: np.ndarray  # (B, m) held reference command (read)
+
+
+class CopyScratch(NamedTuple):
+    """Work arrays of :func:`period_copy` (:func:`_scratch_copy`); node ``i``'s block at ``i * n`` (``i * p``)."""
+
+    y: np.ndarray  # (N p,) outputs
+    xhat: np.ndarray  # (N n,) estimates
+    d: np.ndarray  # (N n,) consensus disagreement
+    cq: np.ndarray  # (N rq,) projection coordinates
+    w: np.ndarray  # (N n,) P_u,i d_i
+    bu: np.ndarray  # (N n,) Bbar_i u (held)
+    Bu: np.ndarray  # (n,) B u (held)
+    Br: np.ndarray  # (n,) B r (held)
+    zn: np.ndarray  # (N n,) observer right-hand side
+    xdot: np.ndarray  # (n,)
+    xrdot: np.ndarray  # (n,)
+    vnew: np.ndarray  # (m_v,)
+    nw: np.ndarray  # (N,) ||eps_iu||
+    nw2: np.ndarray  # (N,) ||eps_iu||^2
+    coef: np.ndarray  # (N,) gamma_i + gamma_s,i / ||eps_iu||
+
+
+class TileState(NamedTuple):
+    """A tile's state and held inputs, copy axis last (:func:`_scratch_tile`, :func:`_gather`)."""
+
+    X: np.ndarray  # (n, W)
+    Z: np.ndarray  # (N, n, W)
+    G: np.ndarray  # (N, W)
+    GS: np.ndarray  # (N, W)
+    V: np.ndarray  # (m_v, W)
+    XR: np.ndarray  # (n, W)
+    U: np.ndarray  # (m, W)
+    R: np.ndarray  # (m, W)
+
+
+class TileWork(NamedTuple):
+    """Work arrays of :func:`_tile_body`, copy axis last."""
+
+    Y: np.ndarray  # (N, p, W)
+    XH: np.ndarray  # (N, n, W)
+    D: np.ndarray  # (N, n, W)
+    CQ: np.ndarray  # (rq, W)
+    Wv: np.ndarray  # (n, W)
+    BU: np.ndarray  # (N, n, W)
+    Bu: np.ndarray  # (n, W)
+    Br: np.ndarray  # (n, W)
+    ZN: np.ndarray  # (n, W)
+    XD: np.ndarray  # (n, W)
+    XRD: np.ndarray  # (n, W)
+    VN: np.ndarray  # (m_v, W)
+    nw2: np.ndarray  # (W,)
+    coef: np.ndarray  # (W,)
+    nw: np.ndarray  # (W,)
+    flags: np.ndarray  # (W,) 1.0: the lane failed the stability test (recomputed by period_copy)
 
 
 @_njit
 def _scratch_copy(ka):
-    """Work arrays of :func:`period_copy` (allocated once per batch call)."""
+    """:class:`CopyScratch` (allocated once per batch call)."""
     N, n, p, rq, mv = ka.E_bar.shape[0], ka.E_bar.shape[1], ka.C.shape[1], ka.Q_proj.shape[2], ka.B_v.shape[1]
-    return (np.empty(N * p), np.empty(N * n), np.empty(N * n), np.empty(N * rq), np.empty(N * n), np.empty(N * n),
-            np.empty(n), np.empty(n), np.empty(N * n), np.empty(n), np.empty(n), np.empty(mv), np.empty(N),
-            np.empty(N), np.empty(N))
+    return CopyScratch(np.empty(N * p), np.empty(N * n), np.empty(N * n), np.empty(N * rq), np.empty(N * n),
+                       np.empty(N * n), np.empty(n), np.empty(n), np.empty(N * n), np.empty(n), np.empty(n),
+                       np.empty(mv), np.empty(N), np.empty(N), np.empty(N))
 
 
 @_njit_inline
@@ -146,26 +223,58 @@ def _terms(out, sp, vec):
         out[q] = out[q] + val[j] * vec[gcol[j]]
 
 
-@_njit
-def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
-    """One control period of copy ``b`` in place (batch-first arrays, see module doc).
+@_njit_inline
+def _take(rec, src, sender, deliver, n):
+    """``rec[e] = src[sender[e]]`` (``src`` flat, node ``j`` at ``j * n``) for every delivering link."""
+    for e in range(sender.shape[0]):
+        if deliver[e]:
+            js = sender[e] * n
+            for c in range(n):
+                rec[e, c] = src[js + c]
 
-    ``x (B, n)``, ``z (B, N, n)``, ``gamma``/``gamma_s (B, N)``, ``v (B, m_v)``, ``x_r (B, n)``;
-    held ``u``/``r (B, m)``; ``ka`` the :class:`~dobs_envs.sim.kernel_args.KernelArgs`; ``sc``
-    the work arrays of :func:`_scratch_copy`. Every matrix-vector product runs over the stored
-    entries of a row-compressed matrix (``ka.rows``), each output summing its terms in column
-    order, as :func:`period_tile` does per copy.
+
+@_njit
+def period_copy(b, pa, ka, sc, fault, fsc):
+    """One control period of copy ``b`` in place (batch-first :class:`PeriodArrays` ``pa``, see module doc).
+
+    ``ka`` the :class:`~dobs_envs.sim.kernel_args.KernelArgs`; ``sc`` the :class:`CopyScratch`;
+    ``fault`` None (the ideal network) or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with its
+    work arrays ``fsc`` (:class:`~dobs_envs.sim.fault_kernel.FaultCopyScratch`; None without faults):
+    the copy's deliveries are written to ``fault.delivered[b]``, its received copies and snapshot ring
+    updated, the period's draws read, not advanced (:func:`advance_rows` does). Every matrix-vector
+    product runs over the stored entries of a row-compressed matrix (``ka.rows``), each output summing
+    its terms in column order, as :func:`period_tile` does per copy.
     """
     rows = ka.rows
-    proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
+    proj_range, nbr_idx, nbr_w = ka.proj_range, ka.nbr_idx, ka.nbr_w
     phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
     dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
-    y, xhat, d, cq, w, bu, Bu, Br, zn, xdot, xrdot, vnew, nwv, nw2v, coef = sc
-    N, n = z.shape[1], z.shape[2]
+    y, xhat, d, cq, w, bu, Bu, Br = sc.y, sc.xhat, sc.d, sc.cq, sc.w, sc.bu, sc.Bu, sc.Br
+    zn, xdot, xrdot, vnew, nwv, nw2v, coef = sc.zn, sc.xdot, sc.xrdot, sc.vnew, sc.nw, sc.nw2, sc.coef
+    gamma, gamma_s = pa.gamma, pa.gamma_s
+    N, n = pa.z.shape[1], pa.z.shape[2]
     p, mv = ka.C.shape[1], ka.B_v.shape[1]
     rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
-    xb, xrb, vb, ub, rb = x[b], x_r[b], v[b], u[b], r[b]
-    zb = z[b].reshape(N * n)  # node i's state at i * n
+    if fault is None:
+        deg = ka.degree
+    else:
+        # the faulted O-O exchange (numpy_step._FaultedExchange): its arrays taken out of the bundles once
+        # per period (per Euler step, each unpacked array would cost a reference count update)
+        fk.deliveries_copy(b, fault, fsc)  # the period's deliveries (fault_state.oo_losses), the active graph
+        fa, fs = fault.args, fault.state
+        deg, wl, deliver = fsc.degree, fsc.weight, fsc.deliver
+        noisy = fa.noise_std > 0.0
+        noise_a = fs.noise
+        sender, receiver = fa.sender, fa.receiver
+        E = sender.shape[0]
+        k0 = fs.period[b]
+        rec = fs.received[b]  # (E, n) held copies r_e
+        snaps = fs.snapshots[b]  # (R, N, n)
+        M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
+        continuous = fa.continuous
+        refresh = continuous and lag == 0
+    xb, xrb, vb, ub, rb = pa.x[b], pa.x_r[b], pa.v[b], pa.u[b], pa.r[b]
+    zb = pa.z[b].reshape(N * n)  # node i's state at i * n
     # held inputs (ZOH over the control period): Bbar_i u, B u, B r
     bu[:] = 0.0
     _terms(bu, rows.B_bar, ub)
@@ -174,7 +283,7 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
     Br[:] = 0.0
     _terms(Br, rows.B, rb)
     hmin = dt / MAX_SPLIT
-    for _ in range(substeps):
+    for j in range(substeps):
         # one Euler step of length dt; split into shorter steps (v held) when the stability
         # test on the adaptive gains fails (module doc, "Stable steps"; eqs. (zidynamic), (gammaiis))
         tau = dt  # time left in this Euler step
@@ -182,23 +291,55 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
         split = False
         first = True
         while True:
-            # eq. (localmeasure) y_i = C_i x ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
+            # eq. (localmeasure) y_i = C_i x (+ the held noise) ; eq. (hatxieq) xhat_i = z_i + Gbar_i y_i
             for q in range(N * p):
                 y[q] = 0.0
             _terms(y, rows.C, xb)
+            if fault is not None:
+                if noisy:
+                    for i in range(N):
+                        for q in range(p):
+                            y[i * p + q] = y[i * p + q] + noise_a[b, i, q]
             for q in range(N * n):
                 xhat[q] = zb[q]
             _terms(xhat, rows.G_bar, y)
-            # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
-            for i in range(N):
-                for k in range(n):
-                    d[i * n + k] = deg[i] * xhat[i * n + k]
-                for q in range(maxdeg):
-                    a = nbr_w[i, q]
+            if fault is None:
+                # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
+                for i in range(N):
+                    for k in range(n):
+                        d[i * n + k] = deg[i] * xhat[i * n + k]
+                    for q in range(maxdeg):
+                        a = nbr_w[i, q]
+                        if a != 0.0:
+                            jn = nbr_idx[i, q] * n
+                            for k in range(n):
+                                d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
+            else:
+                # broadcasts (at the Euler steps s counted from the copy's reset that are multiples of M)
+                if first:
+                    s_ = k0 * substeps + j
+                    if continuous or s_ % M == 0:
+                        if lag > 0:
+                            qb = s_ // M
+                            slot = qb % ring
+                            for i in range(N):
+                                for k in range(n):
+                                    snaps[slot, i, k] = xhat[i * n + k]
+                            old = snaps[(qb - lag) % ring]  # not yet written before lag broadcasts: t = 0
+                            _take(rec, old.reshape(N * n), sender, deliver, n)
+                        else:
+                            _take(rec, xhat, sender, deliver, n)
+                elif refresh:  # continuous exchange: fresh copies in the shortened steps too
+                    _take(rec, xhat, sender, deliver, n)
+                # eq. (H_idefine) with held copies: d_i = sum_e a_e (xhat_i - r_e) over the links into i
+                for q in range(N * n):
+                    d[q] = 0.0
+                for e in range(E):
+                    a = wl[e]
                     if a != 0.0:
-                        jn = nbr_idx[i, q] * n
+                        ir = receiver[e] * n
                         for k in range(n):
-                            d[i * n + k] = d[i * n + k] - a * xhat[jn + k]
+                            d[ir + k] = d[ir + k] + a * (xhat[ir + k] - rec[e, k])
             # w_i = P_u,i d_i through the thinner of the two bases:
             # Q spans Im T_iu (w = Q Q^T d) or Im T_id (w = d - Q Q^T d)
             for q in range(N * rq):
@@ -274,11 +415,11 @@ def period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc):
                 break
             tau = tau - h
         # exosystem v <- expm(S dt) v
-        for j in range(mv):
-            vnew[j] = 0.0
+        for jv in range(mv):
+            vnew[jv] = 0.0
         _terms(vnew, rows.Phi_v, vb)
-        for j in range(mv):
-            vb[j] = vnew[j]
+        for jv in range(mv):
+            vb[jv] = vnew[jv]
 
 
 @_njit_inline
@@ -302,20 +443,21 @@ def _stable_step(dg, g, ph, nw2):
 
 @_njit
 def _scratch_tile(ka, W):
-    """Tile state (X, Z, G, GS, V, XR, U, R) and work arrays of :func:`period_tile` for ``W`` copies."""
+    """:class:`TileState` and :class:`TileWork` of :func:`period_tile` for ``W`` copies."""
     N, n, p, rq = ka.E_bar.shape[0], ka.E_bar.shape[1], ka.C.shape[1], ka.Q_proj.shape[2]
     mv, m = ka.B_v.shape[1], ka.B.shape[1]
-    state = (np.empty((n, W)), np.empty((N, n, W)), np.empty((N, W)), np.empty((N, W)), np.empty((mv, W)),
-             np.empty((n, W)), np.empty((m, W)), np.empty((m, W)))
-    work = (np.empty((N, p, W)), np.empty((N, n, W)), np.empty((N, n, W)), np.empty((rq, W)), np.empty((n, W)),
-            np.empty((N, n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)),
-            np.empty((n, W)), np.empty((mv, W)), np.empty(W), np.empty(W), np.empty(W), np.empty(W))
+    state = TileState(np.empty((n, W)), np.empty((N, n, W)), np.empty((N, W)), np.empty((N, W)), np.empty((mv, W)),
+                      np.empty((n, W)), np.empty((m, W)), np.empty((m, W)))
+    work = TileWork(np.empty((N, p, W)), np.empty((N, n, W)), np.empty((N, n, W)), np.empty((rq, W)),
+                    np.empty((n, W)), np.empty((N, n, W)), np.empty((n, W)), np.empty((n, W)), np.empty((n, W)),
+                    np.empty((n, W)), np.empty((n, W)), np.empty((mv, W)), np.empty(W), np.empty(W), np.empty(W),
+                    np.empty(W))
     return state, work
 
 
 @_njit
-def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
-    """One control period of a tile of ``W`` copies, copy axis last, in place (:func:`_tile_body`).
+def period_tile(ts, ka, wk, W, fault, ft, lo):
+    """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place (:func:`_tile_body`).
 
     ``W`` must be a compile-time constant (:data:`TILE`): call it from compiled code with a
     constant (from Python, every call would recompile); widths of 32 or more (LLVM unrolls
@@ -323,61 +465,168 @@ def period_tile(X, Z, G, GS, V, XR, U, R, ka, work, W):
     :func:`period_tile_any`.
     """
     numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
-    _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W)
+    _tile_body(ts, ka, wk, W, fault, ft, lo)
 
 
 @_njit
-def period_tile_any(X, Z, G, GS, V, XR, U, R, ka, work, W):
+def period_tile_any(ts, ka, wk, W, fault, ft, lo):
     """:func:`period_tile` with the width ``W`` known at run time only (one compilation for every
     width; the loops over the copies are vectorised with run-time trip counts). The same
     arithmetic per copy: results are bitwise those of :func:`period_tile` and :func:`period_copy`."""
-    _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W)
+    _tile_body(ts, ka, wk, W, fault, ft, lo)
 
 
 @_njit_inline
-def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
-    """One control period of a tile of ``W`` copies, copy axis last, in place.
+def _tile_body(ts, ka, wk, W, fault, ft, lo):
+    """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place.
 
-    ``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``, ``XR (n, W)``,
-    ``U``/``R (m, W)`` (arrays at least ``W`` wide). Per copy the same operations in the same
-    order as :func:`period_copy`; the innermost loops run over the copies (SIMD), each pass
-    over the copies adding up to four terms. Inlined into :func:`period_tile` (``W`` constant)
-    and :func:`period_tile_any` (``W`` at run time).
+    ``ts`` the :class:`TileState` (``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``,
+    ``XR (n, W)``, ``U``/``R (m, W)``, arrays at least ``W`` wide), ``wk`` the :class:`TileWork`;
+    ``fault`` None or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with the tile's fault arrays
+    ``ft`` (:class:`~dobs_envs.sim.fault_kernel.FaultTile`). Per copy the same operations in the same
+    order as :func:`period_copy`; the innermost loops run over the copies (SIMD), each pass over the
+    copies adding up to four terms. Inlined into :func:`period_tile` (``W`` constant) and
+    :func:`period_tile_any` (``W`` at run time).
     """
     rows = ka.rows
     proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
     phi, phi_s, sigma, sigma_s = ka.phi, ka.phi_s, ka.sigma, ka.sigma_s
     dt, substeps, has_reference = ka.dt, ka.substeps, ka.has_reference
-    Y, XH, D, CQ, Wv, BU, Bu, Br, ZN, XD, XRD, VN, nw2, coef, nw, FL = work
+    X, Z, G, GS, V, XR, U, R = ts.X, ts.Z, ts.G, ts.GS, ts.V, ts.XR, ts.U, ts.R
+    Y, XH, D, CQ, Wv, BU, Bu, Br = wk.Y, wk.XH, wk.D, wk.CQ, wk.Wv, wk.BU, wk.Bu, wk.Br
+    ZN, XD, XRD, VN, nw2, coef, nw, FL = wk.ZN, wk.XD, wk.XRD, wk.VN, wk.nw2, wk.coef, wk.nw, wk.flags
     N, n = Z.shape[0], Z.shape[1]
     p, mv = ka.C.shape[1], ka.B_v.shape[1]
     rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
-    for c in range(W):
-        FL[c] = 0.0
+    if fault is None:
+        for c in range(W):
+            FL[c] = 0.0
+    else:
+        # the faulted O-O exchange, per lane (its deliveries, its graph's weights, broadcasts at its own Euler
+        # step count); the arrays taken out of the bundles once per period
+        fa = fault.args
+        snapshots_a = fault.state.snapshots
+        noisy = fa.noise_std > 0.0
+        NZ, DEG, KP, PH = ft.noise, ft.degree, ft.period, ft.phase
+        REC, WL, DL, BC = ft.received, ft.weight, ft.deliver, ft.broadcast
+        TSN, TSLOT, TCNT, MK, LK, LP = ft.snap, ft.snap_slot, ft.snap_count, ft.mask, ft.links, ft.link_ptr
+        sender, receiver, weight = fa.sender, fa.receiver, fa.weight
+        E = sender.shape[0]
+        M, lag, ring = fa.exchange_steps, fa.lag, fa.ring
+        continuous, switching = fa.continuous, fa.switching
+        for c in range(W):
+            FL[c] = 0.0
+            PH[c] = (KP[c] * substeps) % M  # once per period: no integer division per lane and Euler step
     for i in range(N):
         for k in range(n):
             _tile_dot(BU[i, k], None, rows.B_bar, i * n + k, U, W)
     for k in range(n):
         _tile_dot(Bu[k], None, rows.B, k, U, W)
         _tile_dot(Br[k], None, rows.B, k, R, W)
-    for _ in range(substeps):
+    for j in range(substeps):
         for i in range(N):
             for q in range(p):
                 _tile_dot(Y[i, q], None, rows.C, i * p + q, X, W)
+                if fault is not None:
+                    if noisy:
+                        for c in range(W):
+                            Y[i, q, c] = Y[i, q, c] + NZ[i, q, c]
             for k in range(n):
                 _tile_dot(XH[i, k], Z[i, k], rows.G_bar, i * n + k, Y[i], W)
-        for i in range(N):
-            dg = deg[i]
-            for k in range(n):
-                for c in range(W):
-                    D[i, k, c] = dg * XH[i, k, c]
-            for q in range(maxdeg):
-                a = nbr_w[i, q]
-                if a != 0.0:
-                    j = nbr_idx[i, q]
+        if fault is None:
+            for i in range(N):
+                dg = deg[i]
+                for k in range(n):
+                    for c in range(W):
+                        D[i, k, c] = dg * XH[i, k, c]
+                for q in range(maxdeg):
+                    a = nbr_w[i, q]
+                    if a != 0.0:
+                        jn = nbr_idx[i, q]
+                        for k in range(n):
+                            for c in range(W):
+                                D[i, k, c] = D[i, k, c] - a * XH[jn, k, c]
+        else:
+            # broadcasts (per lane: its own Euler step count s = k S + j): s % M == 0 exactly when
+            # PH + j % M (both in [0, M)) is 0 or M
+            jm = j % M
+            any_bc = False
+            for c in range(W):
+                ph = PH[c] + jm
+                bc = continuous or ph == 0 or ph == M
+                BC[c] = bc
+                any_bc = any_bc or bc
+            if any_bc:
+                if lag > 0:
+                    for c in range(W):
+                        if BC[c]:
+                            b = lo + c
+                            qb = (KP[c] * substeps + j) // M
+                            slot = qb % ring
+                            old = (qb - lag) % ring
+                            t = TCNT[c]
+                            TSLOT[t, c] = slot
+                            TCNT[c] = t + 1
+                            for i in range(N):
+                                for k in range(n):
+                                    TSN[t, i, k, c] = XH[i, k, c]
+                            for e in range(E):
+                                if DL[e, c]:
+                                    js = sender[e]
+                                    for k in range(n):
+                                        REC[e, k, c] = snapshots_a[b, old, js, k]
+                else:
+                    for e in range(E):
+                        js = sender[e]
+                        for c in range(W):
+                            MK[c] = BC[c] & DL[e, c]  # no short-circuit: a vector select below
+                        for k in range(n):
+                            for c in range(W):
+                                REC[e, k, c] = XH[js, k, c] if MK[c] else REC[e, k, c]
+            # d_i = sum_e a_e (xhat_i - r_e) over the links into i (weight 0: skipped, as period_copy)
+            if switching:  # the lanes' graphs differ: a select per lane
+                for i in range(N):
                     for k in range(n):
                         for c in range(W):
-                            D[i, k, c] = D[i, k, c] - a * XH[j, k, c]
+                            D[i, k, c] = 0.0
+                for e in range(E):
+                    ir = receiver[e]
+                    for k in range(n):
+                        for c in range(W):
+                            a = WL[e, c]
+                            D[ir, k, c] = D[ir, k, c] + a * (XH[ir, k, c] - REC[e, k, c]) if a != 0.0 else D[ir, k, c]
+            else:  # one graph: the link's weight is every lane's; node i's links LK[LP[i]:LP[i+1]] (increasing e),
+                # up to two per pass over the lanes: ((0 + a_0 t_0) + a_1 t_1) + ..., the sums of period_copy
+                for i in range(N):
+                    l0, l1 = LP[i], LP[i + 1]
+                    for k in range(n):
+                        if l0 == l1:
+                            for c in range(W):
+                                D[i, k, c] = 0.0
+                        jl = l0
+                        while jl < l1:
+                            e0 = LK[jl]
+                            a0 = weight[0, e0]
+                            if jl + 1 < l1:
+                                e1 = LK[jl + 1]
+                                a1 = weight[0, e1]
+                                if jl == l0:
+                                    for c in range(W):
+                                        xh = XH[i, k, c]
+                                        D[i, k, c] = 0.0 + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                                else:
+                                    for c in range(W):
+                                        xh = XH[i, k, c]
+                                        D[i, k, c] = D[i, k, c] + a0 * (xh - REC[e0, k, c]) + a1 * (xh - REC[e1, k, c])
+                                jl += 2
+                            else:
+                                if jl == l0:
+                                    for c in range(W):
+                                        D[i, k, c] = 0.0 + a0 * (XH[i, k, c] - REC[e0, k, c])
+                                else:
+                                    for c in range(W):
+                                        D[i, k, c] = D[i, k, c] + a0 * (XH[i, k, c] - REC[e0, k, c])
+                                jl += 1
         for i in range(N):
             for c_ in range(rq):
                 _tile_dot(CQ[c_], None, rows.Q_projT, i * rq + c_, D[i], W)
@@ -399,10 +648,16 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
                 coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
             # the stability test of period_copy (with a margin): a lane whose Euler step would be
             # split is flagged and recomputed copy by copy (advance_rows)
-            dgi, phi_i = deg[i], phi[i]
-            for c in range(W):
-                if _crit(dgi, dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
-                    FL[c] = 1.0
+            if fault is None:
+                dgi, phi_i = deg[i], phi[i]
+                for c in range(W):
+                    if _crit(dgi, dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
+                        FL[c] = 1.0
+            else:
+                phi_i = phi[i]
+                for c in range(W):
+                    if _crit(DEG[i, c], dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
+                        FL[c] = 1.0
             for k in range(n):
                 for c in range(W):
                     ZN[k, c] = BU[i, k, c] - coef[c] * Wv[k, c]
@@ -432,11 +687,11 @@ def _tile_body(X, Z, G, GS, V, XR, U, R, ka, work, W):
         for k in range(n):
             for c in range(W):
                 X[k, c] = X[k, c] + dt * XD[k, c]
-        for j in range(mv):
-            _tile_dot(VN[j], None, rows.Phi_v, j, V, W)
-        for j in range(mv):
+        for jv in range(mv):
+            _tile_dot(VN[jv], None, rows.Phi_v, jv, V, W)
+        for jv in range(mv):
             for c in range(W):
-                V[j, c] = VN[j, c]
+                V[jv, c] = VN[jv, c]
 
 
 @_njit_inline
@@ -466,9 +721,10 @@ def _tile_dot(out, init, sp, q, X, W):
 
 
 @_njit
-def _gather(state, lo, nl, x, z, gamma, gamma_s, v, x_r, u, r):
-    """Copies ``lo .. lo+nl-1`` into the tile (lanes past ``nl`` repeat the last copy)."""
-    X, Z, G, GS, V, XR, U, R = state
+def _gather(ts, lo, nl, pa):
+    """Copies ``lo .. lo+nl-1`` of ``pa`` into the tile ``ts`` (lanes past ``nl`` repeat the last copy)."""
+    X, Z, G, GS, V, XR, U, R = ts.X, ts.Z, ts.G, ts.GS, ts.V, ts.XR, ts.U, ts.R
+    x, z, gamma, gamma_s, v, x_r, u, r = pa.x, pa.z, pa.gamma, pa.gamma_s, pa.v, pa.x_r, pa.u, pa.r
     W = X.shape[1]
     N, n = Z.shape[0], Z.shape[1]
     for c in range(W):
@@ -489,15 +745,18 @@ def _gather(state, lo, nl, x, z, gamma, gamma_s, v, x_r, u, r):
 
 
 @_njit
-def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, ka):
-    """Copies ``lo .. lo+nl-1`` back from the tile, except lanes flagged in ``FL`` (stability test of
-    :func:`_tile_body`): those are advanced again from their unchanged batch rows by :func:`period_copy`."""
-    X, Z, G, GS, V, XR, U, R = state
+def _scatter(ts, wk, ft, lo, nl, pa, ka, sc, fault, fsc):
+    """Copies ``lo .. lo+nl-1`` back from the tile (with their fault state), except lanes flagged in
+    ``wk.flags`` (stability test of :func:`_tile_body`): those are advanced again from their unchanged
+    batch rows by :func:`period_copy`."""
+    X, Z, G, GS, V, XR = ts.X, ts.Z, ts.G, ts.GS, ts.V, ts.XR
+    x, z, gamma, gamma_s, v, x_r = pa.x, pa.z, pa.gamma, pa.gamma_s, pa.v, pa.x_r
+    FL = wk.flags
     N, n = Z.shape[0], Z.shape[1]
     for c in range(nl):
         b = lo + c
         if FL[c] != 0.0:
-            period_copy(b, x, z, gamma, gamma_s, v, x_r, u, r, ka, _scratch_copy(ka))
+            period_copy(b, pa, ka, sc, fault, fsc)
             continue
         for k in range(n):
             x[b, k] = X[k, c]
@@ -509,32 +768,55 @@ def _scatter(state, lo, nl, x, z, gamma, gamma_s, v, x_r, FL, u, r, ka):
                 z[b, i, k] = Z[i, k, c]
         for j in range(V.shape[0]):
             v[b, j] = V[j, c]
+        if fault is not None:
+            fk.scatter_lane(ft, c, b, fault)
 
 
 @_njit
-def advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, ka, lo, hi):
-    """One control period of copies ``lo .. hi-1`` in place: tiles of :data:`TILE` copies, then a
-    remainder of at least :data:`MIN_TILE` copies as one tile of exactly that width
-    (:func:`period_tile_any`), a smaller remainder copy by copy."""
+def advance_rows(pa, ka, lo, hi, fault):
+    """One control period of copies ``lo .. hi-1`` of ``pa`` (:class:`PeriodArrays`) in place: tiles of
+    :data:`TILE` copies, then a remainder of at least :data:`MIN_TILE` copies as one tile of exactly that
+    width (:func:`period_tile_any`), a smaller remainder copy by copy; the same per-copy arithmetic either
+    way. ``fault`` None, or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod`: the faulted period, then
+    each copy's next-period draws (:func:`~dobs_envs.sim.fault_kernel.draws_rows`). Threads may run
+    disjoint ranges concurrently (no GIL)."""
+    N, n, p = pa.z.shape[1], pa.z.shape[2], ka.C.shape[1]
+    sc = _scratch_copy(ka)
+    if fault is None:
+        fsc = None
+    else:
+        fsc = fk.scratch_copy(fault.args, N)
     b = lo
     if hi - b >= TILE:
-        st, wk = _scratch_tile(ka, TILE)
+        ts, wk = _scratch_tile(ka, TILE)
+        if fault is None:
+            ft = None
+        else:
+            ft = fk.scratch_tile(fault.args, N, n, p, TILE)
         while hi - b >= TILE:
-            _gather(st, b, TILE, x, z, gamma, gamma_s, v, x_r, u, r)
-            period_tile(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, TILE)
-            _scatter(st, b, TILE, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka)
+            _gather(ts, b, TILE, pa)
+            if fault is not None:
+                fk.gather_tile(ft, b, TILE, fault)
+            period_tile(ts, ka, wk, TILE, fault, ft, b)
+            _scatter(ts, wk, ft, b, TILE, pa, ka, sc, fault, fsc)
             b += TILE
     if hi - b >= MIN_TILE:
         nl = hi - b
-        st, wk = _scratch_tile(ka, nl)
-        _gather(st, b, nl, x, z, gamma, gamma_s, v, x_r, u, r)
-        period_tile_any(st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, wk, nl)
-        _scatter(st, b, nl, x, z, gamma, gamma_s, v, x_r, wk[15], u, r, ka)
+        ts, wk = _scratch_tile(ka, nl)
+        if fault is None:
+            ft = None
+        else:
+            ft = fk.scratch_tile(fault.args, N, n, p, nl)
+        _gather(ts, b, nl, pa)
+        if fault is not None:
+            fk.gather_tile(ft, b, nl, fault)
+        period_tile_any(ts, ka, wk, nl, fault, ft, b)
+        _scatter(ts, wk, ft, b, nl, pa, ka, sc, fault, fsc)
         b = hi
-    if hi > b:
-        sc = _scratch_copy(ka)
-        for c in range(b, hi):
-            period_copy(c, x, z, gamma, gamma_s, v, x_r, u, r, ka, sc)
+    for c in range(b, hi):
+        period_copy(c, pa, ka, sc, fault, fsc)
+    if fault is not None:
+        fk.draws_rows(lo, hi, fault.args, fault.state)
 
 
 #: ``unpack_kernel_args(KF, KI)``: the :class:`~dobs_envs.sim.kernel_args.KernelArgs` packed in
@@ -544,15 +826,30 @@ unpack_kernel_args = compiled_unpack(KernelArgs, _njit, "unpack_kernel_args")
 
 
 @_njit
-def _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, KF, KI):
-    # copies made inside compiled code: ~4 us cheaper per call than numpy .copy() x 6
+def fault_period(FF, FI, fs, delivered):
+    """The :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` of the packed
+    :class:`~dobs_envs.sim.fault_state.FaultArgs` ``(FF, FI)``, the fault-state tuple ``fs`` (plain, in
+    :class:`~dobs_envs.sim.fault_state.FaultState` order) and the deliveries ``delivered (B, E)``."""
+    return fk.FaultPeriod(fk.unpack_fault_args(FF, FI), FaultState(*fs), delivered)
+
+
+@_njit
+def _control_period(x, z, gamma, gamma_s, v, x_r, u, r, kp, fault):
+    """:func:`advance_rows` on copies of the state (made here: ~4 us cheaper per call than numpy
+    ``.copy()`` x 6); ``kp = (KF, KI)``; ``fault`` None or ``(FF, FI, fs, delivered)``."""
     x = x.copy()
     z = z.copy()
     gamma = gamma.copy()
     gamma_s = gamma_s.copy()
     v = v.copy()
     x_r = x_r.copy()
-    advance_rows(x, z, gamma, gamma_s, v, x_r, u, r, unpack_kernel_args(KF, KI), 0, x.shape[0])
+    KF, KI = kp
+    pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
+    if fault is None:
+        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], None)
+    else:
+        FF, FI, fs, delivered = fault
+        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], fault_period(FF, FI, fs, delivered))
     return x, z, gamma, gamma_s, v, x_r
 
 
@@ -566,7 +863,26 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
         u = np.ascontiguousarray(u, dtype=np.float64)
     if r.dtype != np.float64 or not r.flags.c_contiguous:
         r = np.ascontiguousarray(r, dtype=np.float64)
-    return _control_period_copy(x, z, gamma, gamma_s, v, x_r, u, r, *p.kernel_packed)
+    return _control_period(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_packed, None)
+
+
+def control_period_faulted_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p, fa, fs, *, delivered=None):
+    """Compiled counterpart of :func:`~dobs_envs.sim.numpy_step.control_period_faulted_numpy` (same
+    arguments and returns: new arrays, the new :class:`~dobs_envs.sim.fault_state.FaultState`; inputs
+    untouched).
+
+    ``fa`` a :class:`~dobs_envs.sim.fault_state.FaultArgs` (packed here on every call: tests and
+    scripts; the environments pack it once) or its packed ``(FF, FI)``; ``delivered (B, E)`` bool,
+    optional, receives the period's deliveries.
+    """
+    FF, FI = pack(fa) if isinstance(fa, FaultArgs) else fa
+    state = [np.ascontiguousarray(a, dtype=np.float64) for a in (x, z, gamma, gamma_s, v, x_r)]
+    st = tuple(np.array(a, copy=True, order="C") for a in fs)
+    if delivered is None:
+        delivered = np.zeros((state[0].shape[0], FaultState(*st).received.shape[1]), dtype=np.bool_)
+    out = _control_period(*state, np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
+                          p.kernel_packed, (FF, FI, st, delivered))
+    return (*out, FaultState(*st))
 
 
 def flops_per_period(p, *, dense: bool = False) -> int:

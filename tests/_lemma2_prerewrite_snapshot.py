@@ -1,11 +1,19 @@
-r"""Frozen reference: ``dobs_envs/design/lemma2.py`` as of commit ecaeb14 (before issue 12).
+r"""Pre-rewrite regression snapshot: ``dobs_envs/design/lemma2.py`` as of commit ecaeb14 (before issue 12).
 
-Kept verbatim (apart from this docstring and absolute imports) so that
-``tests/test_lemma2_staircase.py`` can check that the O(n^3) implementation
-gives the same results, and ``benchmarks/bench_design.py`` can time the old
-O(n^4) algorithm (``_unobservable_subspace``: up to r + 1 full SVDs) next to
-the new one on the same system in the same run. Not part of the package; do
-not import it from ``dobs_envs``.
+A snapshot, not a reference that proves anything: about two thirds of its lines are still the
+package's, so a bug in the shared lines passes every comparison with it. What it is for:
+
+- a regression check of the O(n^3) rewrite (``tests/test_lemma2_staircase.py``: same ``delta``,
+  subspace and observer blocks as before the rewrite), next to the independent checks those tests
+  compute themselves (the residuals ``N B`` and ``N A - E N - F C`` with ``N = T_d^T - G C``,
+  ``E`` Hurwitz or zero, ``T_d`` orthonormal) and the geometric maximality test
+  (``tests/test_maximality.py``);
+- the inputs that made the old code fail (``tests/test_design_scaling.py``);
+- timing the old O(n^4) algorithm (``_unobservable_subspace``: up to r + 1 full SVDs) next to the new
+  one in ``benchmarks/bench_design.py``.
+
+Kept verbatim apart from this docstring and absolute imports. Not part of the package; do not
+import it from ``dobs_envs``.
 
 Original module docstring follows.
 
