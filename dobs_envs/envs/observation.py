@@ -51,7 +51,7 @@ last one received), ``neighbors`` the copies node ``i`` holds of its O-O neighbo
 received/stale mask; the privileged components stay the true values (``estimates``: the nodes' own,
 noisy-measurement estimates). The feature vector then ends with ``xhat_rx (K n) | nbr_rx (E n) |
 co_rx (K) | oo_rx (E)`` before the constants (written by
-:mod:`dobs_envs.envs.fault_step_kernel`).
+:func:`dobs_envs.envs.features.fault_rows`).
 
 Presets: ``"local"`` = ``(y, xhat, neighbors, mask, r, received)`` (``r`` only with a
 reference, ``received`` only with faults), ``"full"`` = local + ``(x, x_r, estimates, gamma, gamma_s,

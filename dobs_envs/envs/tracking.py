@@ -156,7 +156,7 @@ class TrackingEnv(DObsParallelEnv):
     (``1 + D`` entries: 1 if the C-O packet arrived at this step, then one flag per neighbour
     slot: 1 if that value arrived at this step, 0 if it is held from before); the infos add
     ``co_received`` (bool) and ``oo_received_fraction`` (float)
-    (:mod:`dobs_envs.envs.observation`, :mod:`dobs_envs.envs.fault_step_kernel`). The fault
+    (:mod:`dobs_envs.envs.observation`, :func:`dobs_envs.envs.features.fault_rows`). The fault
     processes of a copy are drawn from a seed taken from the environment's generator at reset
     (``reset(seed=...)`` reproduces them). ``tracking_lossy_v0`` is this environment with a
     default fault setting.
