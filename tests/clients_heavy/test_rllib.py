@@ -22,6 +22,10 @@ MODULES = {"tracking": tracking_v0, "hetero_mas": hetero_mas_v0}
 @pytest.fixture(scope="module", autouse=True)
 def ray_local():
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    # registered in this Ray session: a registration made before any ray.init is handed to the first session
+    # only, and the documentation's RLlib block (tests/clients_heavy/test_docs_blocks.py) starts and stops one
+    # first, which left this test's env unknown ("Environment `dobs_envs_parallel` doesn't exist", CI)
+    register_env("dobs_envs_parallel", _make)
     yield
     ray.shutdown()
 
@@ -31,8 +35,6 @@ def _make(config: dict):
     module = MODULES[config.pop("env")]
     return ParallelPettingZooEnv(module.parallel_env(**config))
 
-
-register_env("dobs_envs_parallel", _make)
 
 
 def _one_iteration(env_config: dict, policies: dict, mapping):
