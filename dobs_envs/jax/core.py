@@ -34,7 +34,7 @@ from .dynamics import coefs, control_period, outputs
 from .operators import stack, unstack
 from .params import EnvState
 
-__all__ = ["Features", "StepOut", "advance", "features", "observations", "initial_state", "reset",
+__all__ = ["Features", "StepOut", "advance", "features", "observations", "initial_state", "reset", "task_error",
            "bound_step_cost"]
 
 
@@ -86,6 +86,15 @@ def features(state: EnvState, params, structure) -> Features:
               & jnp.all(jnp.isfinite(state.gamma)) & jnp.all(jnp.isfinite(state.gamma_s))
               & jnp.all(jnp.isfinite(state.v)))
     return Features(f, est, cost, jnp.linalg.norm(e), jnp.linalg.norm(x), finite)
+
+
+def task_error(state: EnvState, structure):
+    """The task's own error (hetero_mas: the rendezvous disagreement ``||p - pbar 1||`` of the positions ``p``,
+    as :class:`dobs_envs.envs.hetero_mas.Disagreement`), or None when the task has none."""
+    if structure.task_positions is None:
+        return None
+    pos = state.x[structure.task_positions]
+    return jnp.linalg.norm(pos - jnp.mean(pos))
 
 
 def observations(feat: Features, structure) -> jax.Array:

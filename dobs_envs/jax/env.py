@@ -162,8 +162,7 @@ class DObsEnv:
         info = {"tracking_error": feat.tracking_error, "estimation_errors": feat.estimation_errors,
                 "gamma": state.gamma, "gamma_s": state.gamma_s}
         if st.task_positions is not None:
-            pos = state.x[st.task_positions]
-            info[st.task_error_key] = jnp.linalg.norm(pos - jnp.mean(pos))
+            info[st.task_error_key] = _core.task_error(state, st)
         info["termination_reason"] = reason
         return info
 

@@ -135,8 +135,7 @@ class DObsMultiAgentEnv:
                 "tracking_error": jnp.broadcast_to(feat.tracking_error, (K,)),
                 "gamma": state.gamma[self._links], "gamma_s": state.gamma_s[self._links]}
         if st.task_positions is not None:
-            pos = state.x[st.task_positions]
-            info[st.task_error_key] = jnp.broadcast_to(jnp.linalg.norm(pos - jnp.mean(pos)), (K,))
+            info[st.task_error_key] = jnp.broadcast_to(_core.task_error(state, st), (K,))
         info["termination_reason"] = jnp.broadcast_to(reason, (K,))
         return info
 

@@ -48,13 +48,6 @@ def advance_fn(structure):
     return fn[1]
 
 
-def _task_error(state, structure):
-    if structure.task_positions is None:
-        return None
-    pos = np.asarray(state.x)[structure.task_positions]
-    return float(np.linalg.norm(pos - pos.mean()))
-
-
 def _rel(a, b) -> float:
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if a.size == 0:
@@ -99,7 +92,7 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
                                          _rel(out.features.estimation_errors, core.estimation_errors[0]))
         worst["tracking_error"] = max(worst["tracking_error"], _rel(out.features.tracking_error,
                                                                    core.tracking_errors[0]))
-        te = _task_error(ns, structure)
+        te = _core.task_error(ns, structure)
         if te is not None:
             worst["task_error"] = max(worst["task_error"], _rel(te, core.task_errors()[0]))
         worst["ends"] += int(bool(out.terminated) != bool(res.terminated[0])) \
