@@ -14,6 +14,7 @@ core. Compilation is excluded (one warm-up call). The lock-step cost of the spli
 large that every one of its Euler steps is split.
 
     python benchmarks/bench_jax_envs.py --env tracking --batch 1 64 1024 4096 --out results/bench_jax_envs.json
+    python benchmarks/bench_jax_envs.py --env tracking_lossy --batch 1 1024 --out results/bench_jax_envs_faults.json
 """
 from __future__ import annotations
 
@@ -59,13 +60,15 @@ def bench_core(env_id: str, B: int, steps: int, repeats: int) -> dict:
     return {"cpu_s": cpu, "wall_s": wall, "steps_per_s_cpu": B * steps / cpu, "steps_per_s_wall": B * steps / wall}
 
 
-def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockstep: float = 0.0) -> dict:
+def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockstep: float = 0.0,
+              faults: bool = False) -> dict:
     import jax
     import jax.numpy as jnp
 
     from dobs_envs.jax import make
 
-    with jax.enable_x64(dtype == "float64"):
+    # communication faults draw in 64-bit integers (dobs_envs.jax.faults): x64 on, the simulation in ``dtype``
+    with jax.enable_x64(dtype == "float64" or faults):
         env, params = make(env_id, dtype=dtype)
         m = env.structure.m
         _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(0), B), params)
@@ -111,14 +114,16 @@ def main(argv=None) -> int:
         print(f"bench_jax_envs: unknown --env {a.env!r}; choose from {sorted(ENVIRONMENTS)}", file=sys.stderr)
         return 2
     env_id = ENVIRONMENTS[a.env].gym_id
+    faults = ENVIRONMENTS[a.env].load_class().make_core(1).faults is not None
     rows = []
     for B in a.batch:
         steps = a.steps or int(min(400, max(20, 200_000 // B)))
         row = {"B": B, "steps": steps, "core": bench_core(env_id, B, steps, a.repeats)}
         for dt in ("float64", "float32"):
-            row[f"jax_{dt}"] = bench_jax(env_id, B, steps, a.repeats, dt)
+            row[f"jax_{dt}"] = bench_jax(env_id, B, steps, a.repeats, dt, faults=faults)
         for g in a.lockstep if B > 1 else ():
-            row[f"jax_float64_lockstep_{g:g}"] = bench_jax(env_id, B, steps, a.repeats, "float64", lockstep=g)
+            row[f"jax_float64_lockstep_{g:g}"] = bench_jax(env_id, B, steps, a.repeats, "float64", lockstep=g,
+                                                           faults=faults)
         rows.append(row)
         c = row["core"]["steps_per_s_cpu"]
         msg = " | ".join(f"{k} {v['steps_per_s_cpu']:,.0f}/s ({v['steps_per_s_cpu'] / c:.2f}x)"

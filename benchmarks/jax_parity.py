@@ -6,9 +6,12 @@ step, the JAX form advances the core's own state with the same input (:func:`dob
 one_step_episode`); the table gives the largest difference of every quantity relative to
 ``max(1, |value|)``, and the mismatched terminations / truncations / reason codes (0 expected). Then the
 paper controller's free-running returns on the benchmark's evaluation episodes (seeds 10000-10019),
-JAX against compiled, in float64 and float32.
+JAX against compiled, in float64 and float32. With communication faults (tracking_lossy and the fault rows)
+also the fault state (held copies, snapshots, noise, C-O buffers) and the count of steps whose draws or
+received flags differ (0 expected: the same counter-based generator).
 
     python benchmarks/jax_parity.py --steps 400 --episodes 20 --out results/jax_parity.json
+    python benchmarks/jax_parity.py --faults --out results/jax_parity_faults.json
 """
 from __future__ import annotations
 
@@ -26,10 +29,21 @@ CASES = [
     ("disturbance_rejection", {}), ("disturbance_rejection", {"disturbance": "random", "reward": "sqrt"}),
     ("hetero_mas", {}), ("hetero_mas", {"state_bound": 30.0, "termination_penalty": False}),
     ("random_network", {}), ("random_network", {"padded_observations": True, "observation": "full"}),
+    # communication faults: tracking_lossy's defaults, then the other keys on tracking
+    ("tracking_lossy", {}),
+    ("tracking", {"faults": {"oo_period": None, "oo_loss": 0.2, "oo_delay": 1, "co_loss": 0.1, "co_delay": 2}}),
+    ("tracking", {"faults": {"oo_period": 0.01, "oo_burst": {"p_good_bad": 0.1, "p_bad_good": 0.3, "loss_good": 0.05},
+                             "oo_delay": 2, "measurement_noise": 0.02}}),
 ]
+#: the free-running comparison's environments
+FREE_RUN = ("tracking", "disturbance_rejection", "hetero_mas", "random_network", "tracking_lossy")
 SOURCES = ("random", "bang_bang", "paper", "trained")
 COLUMNS = ("x", "z", "gamma", "gamma_s", "v", "x_r", "obs", "reward", "estimation_errors", "tracking_error",
            "task_error")
+
+
+def _faulted(name: str, opts: dict) -> bool:
+    return name == "tracking_lossy" or opts.get("faults") is not None
 
 
 def main(argv=None) -> int:
@@ -37,6 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=400)
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes of the free-running comparison")
     ap.add_argument("--out", help="write the table as JSON (refuses to overwrite)")
+    ap.add_argument("--faults", action="store_true", help="only the rows with communication faults")
     a = ap.parse_args(argv)
     if a.out and os.path.exists(a.out):
         print(f"jax_parity: --out {a.out} exists; remove it or choose another path", file=sys.stderr)
@@ -50,10 +65,12 @@ def main(argv=None) -> int:
     from dobs_envs.registry import ENVIRONMENTS
 
     rows, free = [], []
-    print("| env | options | actions | steps | " + " | ".join(COLUMNS) + " | ends |")
-    print("|" + "---|" * (len(COLUMNS) + 5))
+    print("| env | options | actions | steps | " + " | ".join(COLUMNS) + " | ends | fault state | draws |")
+    print("|" + "---|" * (len(COLUMNS) + 7))
     with jax.enable_x64(True):
         for name, opts in CASES:
+            if a.faults and not _faulted(name, opts):
+                continue
             entry = ENVIRONMENTS[name]
             structure, params, _ = _build(entry, dict(opts, dtype="float64"))
             mod = importlib.import_module(entry.module)
@@ -87,12 +104,16 @@ def main(argv=None) -> int:
                 w = parity.one_step_episode(core, structure, params, inputs, seed=10_000, steps=a.steps)
                 rows.append({"env": name, "options": opts, "actions": src, **w})
                 print(f"| {name} | {', '.join(f'{k}={v}' for k, v in opts.items()) or 'default'} | {src} | "
-                      f"{w['steps']} | " + " | ".join(f"{w[c]:.1e}" for c in COLUMNS) + f" | {w['ends']} |", flush=True)
+                      f"{w['steps']} | " + " | ".join(f"{w[c]:.1e}" for c in COLUMNS) + f" | {w['ends']} | "
+                      + (f"{w['fault']:.1e} | {w['draws']} |" if "fault" in w else "- | - |"), flush=True)
     print("\npaper controller, free-running, evaluation episodes: largest |J_jax - J_compiled| / |J_compiled|")
-    for name in ("tracking", "disturbance_rejection", "hetero_mas", "random_network"):
+    for name in FREE_RUN:
+        if a.faults and not _faulted(name, {}):
+            continue
         entry = ENVIRONMENTS[name]
         for dtype in ("float64", "float32"):
-            with jax.enable_x64(dtype == "float64"):
+            # faults draw in 64-bit integers (dobs_envs.jax.faults): x64 on, the simulation in float32
+            with jax.enable_x64(dtype == "float64" or name == "tracking_lossy"):
                 structure, params, _ = _build(entry, {"dtype": dtype})
                 penv = importlib.import_module(entry.module).parallel_env(max_cycles=int(params.max_steps_in_episode))
                 rel = []

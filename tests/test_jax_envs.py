@@ -198,7 +198,7 @@ def test_box_samples_lie_in_the_box():
     (lambda: make("dobs_envs/Tracking-v0", dtype="float16"), ValueError, "dtype"),
     (lambda: make("dobs_envs/Tracking-v0", max_episode_steps=0), ValueError, "max_episode_steps"),
     (lambda: make("dobs_envs/Tracking-v0", sparse="yes"), ValueError, "sparse"),
-    (lambda: make("dobs_envs/TrackingLossy-v0"), NotImplementedError, "faults"),
+    (lambda: make("dobs_envs/TrackingLossy-v0", faults={"oo_period": 0.0123}), ValueError, "oo_period"),
     (lambda: make_marl("nope_v0"), ValueError, "registered names"),
 ])
 def test_bad_input_gets_a_specific_error(call, exc, match):

@@ -10,7 +10,8 @@ Needs the ``jax`` extra (``pip install 'dobs-envs[jax]'``); ``import dobs_envs``
   the control period (the numpy reference :mod:`dobs_envs.sim.numpy_step` is the specification).
 
 float64 needs ``jax.config.update("jax_enable_x64", True)`` before any array is created; without it
-the environments run in float32 (``make(..., dtype=...)`` chooses explicitly).
+the environments run in float32 (``make(..., dtype=...)`` chooses explicitly). Communication faults
+(``faults=``, ``dobs_envs/TrackingLossy-v0``; :mod:`dobs_envs.jax.faults`) need 64-bit JAX in any dtype.
 """
 from .env import DObsEnv, make, registered_envs
 from .marl import DObsMultiAgentEnv, make_marl

@@ -21,6 +21,7 @@ distributions, with ``jax.random``; :func:`initial_state` builds the state from 
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -30,6 +31,7 @@ from jax.scipy.linalg import expm
 
 from ..envs.distributions import N_RANDOM_TERMS
 from ..envs.step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND
+from . import faults as _faults
 from .dynamics import coefs, control_period, outputs
 from .operators import stack, unstack
 from .params import EnvState
@@ -47,6 +49,8 @@ class Features(NamedTuple):
     tracking_error: jax.Array  # ||e||
     xnorm: jax.Array  # ||x||
     finite: jax.Array  # every entry of x, x_r, z, gamma, gamma_s, v is finite
+    fault: object = None  # faults: the fault state after the boundary's C-O link (dobs_envs.jax.faults.FaultState)
+    received: object = None  # faults: what the agents received (dobs_envs.jax.faults.Received)
 
 
 class StepOut(NamedTuple):
@@ -68,24 +72,35 @@ def reference_command(t, params, structure):
     return a * jnp.sin(w * t + ph)
 
 
-def features(state: EnvState, params, structure) -> Features:
+def features(state: EnvState, params, structure, *, link: bool = False) -> Features:
     """Eqs. (localmeasure), (hatxieq), the reference command, the task error, the cost and the
-    finiteness of one copy (:func:`dobs_envs.envs.numpy_features.write_features_reference`)."""
+    finiteness of one copy (:func:`dobs_envs.envs.numpy_features.write_features_reference`).
+
+    With faults the outputs carry the period's measurement noise and the feature vector ends with what the
+    agents received (:func:`dobs_envs.jax.faults.boundary`; ``link``: run the C-O link, as after a step;
+    False: as at a reset); the fault state after the boundary is :attr:`Features.fault`."""
     x, z, xr, t = state.x, state.z, state.x_r, state.t
     N, n, dt = structure.N, structure.n, structure.dtype
-    y, xhat = outputs(unstack(x), unstack(z), coefs(params, structure), jnp.zeros((), dt))
+    fst = structure.faults
+    noise = unstack(state.fault.noise) if fst is not None and fst.noisy else None
+    y, xhat = outputs(unstack(x), unstack(z), coefs(params, structure), jnp.zeros((), dt), noise)
     y, xhat = stack(y, (N * structure.p,), dt), stack(xhat, (N, n), dt)
     est = jnp.linalg.norm(xhat - x[None, :], axis=1)
     e = x - xr if structure.has_reference else x
+    fault = rx = None
+    received = []
+    if fst is not None:
+        fault, rx = _faults.boundary(fst, params.faults, state.fault, xhat, link=link)
+        received = [rx.xhat_rx.reshape(-1), rx.nbr_rx.reshape(-1), rx.co_rx.astype(dt), rx.oo_rx.astype(dt)]
     f = jnp.concatenate([
         y[structure.y_index], xhat.reshape(-1), x, xr, state.gamma, state.gamma_s, state.v,
-        reference_command(t, params, structure), t[None], e, jnp.zeros(1, dt), jnp.ones(1, dt)])
+        reference_command(t, params, structure), t[None], e, *received, jnp.zeros(1, dt), jnp.ones(1, dt)])
     u = state.u
     cost = e @ (params.Q @ e) + u @ (params.R @ u)
     finite = (jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(xr)) & jnp.all(jnp.isfinite(z))
               & jnp.all(jnp.isfinite(state.gamma)) & jnp.all(jnp.isfinite(state.gamma_s))
               & jnp.all(jnp.isfinite(state.v)))
-    return Features(f, est, cost, jnp.linalg.norm(e), jnp.linalg.norm(x), finite)
+    return Features(f, est, cost, jnp.linalg.norm(e), jnp.linalg.norm(x), finite, fault, rx)
 
 
 def task_error(state: EnvState, structure):
@@ -123,6 +138,8 @@ def _check_x64(structure) -> None:
     if structure.dtype == np.float64 and not jax.config.jax_enable_x64:
         raise ValueError("this environment was made with dtype='float64' but 64-bit JAX is off here: call "
                          "jax.config.update('jax_enable_x64', True) (or make it with dtype='float32')")
+    if structure.faults is not None:
+        _faults.check_x64()
 
 
 def advance(state: EnvState, u, params, structure) -> tuple[EnvState, StepOut]:
@@ -136,10 +153,19 @@ def advance(state: EnvState, u, params, structure) -> tuple[EnvState, StepOut]:
         a, w, ph = state.sig
         v = jnp.sum(a * jnp.sin(w * state.t + ph), axis=1)
     r = reference_command(state.t, p, st)
-    x, z, g, gs, v, xr, _ = control_period(state.x, state.z, state.gamma, state.gamma_s, v, state.x_r, u, r, p, st)
+    fs = state.fault
+    if st.faults is None:
+        x, z, g, gs, v, xr, _ = control_period(state.x, state.z, state.gamma, state.gamma_s, v, state.x_r, u, r, p, st)
+    else:  # the faulted O-O exchange at the ideal one's seam; then the period's end draws
+        x, z, g, gs, v, xr, (rec, snaps) = control_period(
+            state.x, state.z, state.gamma, state.gamma_s, v, state.x_r, u, r, p, st,
+            exchange=partial(_faults.FaultedExchange, fs=fs), carry=(unstack(fs.received), fs.snapshots))
+        fs = _faults.next_period(st.faults, p.faults, fs, stack(rec, fs.received.shape, st.dtype), snaps)
     time = state.time + 1
-    new = state.replace(t=state.t + period, x=x, z=z, gamma=g, gamma_s=gs, v=v, x_r=xr, u=u, time=time)
-    feat = features(new, p, st)
+    new = state.replace(t=state.t + period, x=x, z=z, gamma=g, gamma_s=gs, v=v, x_r=xr, u=u, time=time, fault=fs)
+    feat = features(new, p, st, link=True)
+    if st.faults is not None:
+        new = new.replace(fault=feat.fault)
     rw = -_shaped(feat.cost, p, st) * period
     bound = (feat.xnorm > p.state_bound) & jnp.all(jnp.isfinite(x))  # a finite plant beyond the bound
     non_finite = ~feat.finite & ~bound
@@ -157,10 +183,12 @@ def advance(state: EnvState, u, params, structure) -> tuple[EnvState, StepOut]:
     return new, StepOut(obs, rw, term, trunc, reason.astype(jnp.int32), feat)
 
 
-def initial_state(params, structure, x0, v0=None, x_r0=None, sig=None) -> EnvState:
+def initial_state(params, structure, x0, v0=None, x_r0=None, sig=None, fault_seed=None) -> EnvState:
     """The state at reset with the given plant state ``x0 (n,)`` (``v0 (m_v,)``: the unknown input, default
     the scenario's; ``x_r0 (n,)``: the reference model, default the scenario's; ``sig (3, m_v, L)``: the
-    ``"random"`` disturbance's parameters, ``v0`` then follows from them)."""
+    ``"random"`` disturbance's parameters, ``v0`` then follows from them; ``fault_seed``: with faults, the
+    copy's fault seed, a ``uint64`` (:class:`dobs_envs.sim.fault_state.FaultState` ``seed``: the compiled
+    core's copy with that seed draws the same faults), required then)."""
     st, dt = structure, structure.dtype
     N, m, m_v = st.N, st.m, st.m_v
     if sig is None:
@@ -173,16 +201,35 @@ def initial_state(params, structure, x0, v0=None, x_r0=None, sig=None) -> EnvSta
     v = params.v0 if v0 is None else jnp.asarray(v0, dt)
     if st.disturbance == 0:
         v = jnp.zeros(m_v, dt)
-    return EnvState(t=jnp.zeros((), dt), x=jnp.asarray(x0, dt), z=jnp.zeros((N, st.n), dt), gamma=params.gamma0,
+    x0 = jnp.asarray(x0, dt)
+    z0 = jnp.zeros((N, st.n), dt)
+    fault = None
+    if st.faults is not None:
+        if fault_seed is None:
+            raise ValueError("fault_seed: this environment has communication faults (option faults); give the "
+                             "copy's fault seed (an unsigned 64-bit integer)")
+        K = coefs(params, st)
+
+        def xhat0(noise):
+            y, xh = outputs(unstack(x0), unstack(z0), K, jnp.zeros((), dt), None if noise is None else unstack(noise))
+            return stack(xh, (N, st.n), dt)
+
+        fault = _faults.init_state(st.faults, params.faults, fault_seed, xhat0, dt)
+    return EnvState(t=jnp.zeros((), dt), x=x0, z=z0, gamma=params.gamma0,
                     gamma_s=params.gamma_s0, v=v, x_r=params.x_r0 if x_r0 is None else jnp.asarray(x_r0, dt),
-                    u=jnp.zeros(m, dt), time=jnp.zeros((), jnp.int32), sig=sig)
+                    u=jnp.zeros(m, dt), time=jnp.zeros((), jnp.int32), sig=sig, fault=fault)
 
 
 def reset(key, params, structure) -> EnvState:
     """A reset draw of one copy (:class:`~dobs_envs.envs.distributions.ResetDistribution`'s distributions,
-    drawn with ``jax.random``)."""
+    drawn with ``jax.random``; with faults, the copy's fault seed too, uniform over 64 bits)."""
     _check_x64(structure)
     st, dt = structure, structure.dtype
+    if st.faults is not None:
+        key, kf = jax.random.split(key)
+        fault_seed = jax.random.bits(kf, (), jnp.uint64)
+    else:
+        fault_seed = None
     kx, kv = jax.random.split(key)
     if st.x0_uniform:
         x0 = jax.random.uniform(kx, (st.n,), dt, -params.x0_scale, params.x0_scale)
@@ -195,8 +242,8 @@ def reset(key, params, structure) -> EnvState:
         ph = jax.random.uniform(kp, shape, dt, 0.0, 2 * np.pi)
         a = jax.random.uniform(ka, shape, dt, 0.0, 1.0)
         a = params.disturbance_amplitude * a / jnp.sum(a, axis=1, keepdims=True)
-        return initial_state(params, st, x0, sig=jnp.stack([a, w, ph]))
+        return initial_state(params, st, x0, sig=jnp.stack([a, w, ph]), fault_seed=fault_seed)
     if st.disturbance == 1 and st.exosystem:  # a random time shift of the exosystem's trajectory
         tau = jax.random.uniform(kv, (), dt, 0.0, 4 * np.pi)
-        return initial_state(params, st, x0, v0=expm(params.S * tau) @ params.v0)
-    return initial_state(params, st, x0)
+        return initial_state(params, st, x0, v0=expm(params.S * tau) @ params.v0, fault_seed=fault_seed)
+    return initial_state(params, st, x0, fault_seed=fault_seed)

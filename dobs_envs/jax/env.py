@@ -33,6 +33,7 @@ import numpy as np
 from ..envs.centralized import reject_horizon_options
 from ..registry import ENVIRONMENTS, GYM_IDS
 from . import core as _core
+from .faults import received_fraction
 from .params import EnvParams, EnvState, Structure, from_core
 from .spaces import Box
 
@@ -163,6 +164,9 @@ class DObsEnv:
                 "gamma": state.gamma, "gamma_s": state.gamma_s}
         if st.task_positions is not None:
             info[st.task_error_key] = _core.task_error(state, st)
+        if st.faults is not None:  # per agent, as the compiled env's co_received / oo_received_fraction
+            info["co_received"] = feat.received.co_rx
+            info["oo_received_fraction"] = received_fraction(st.faults, feat.received.oo_rx)
         info["termination_reason"] = reason
         return info
 

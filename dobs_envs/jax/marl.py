@@ -32,6 +32,7 @@ from ..envs.adapter import agent_spaces
 from ..registry import ENVIRONMENTS
 from . import core as _core
 from .env import _build
+from .faults import received_fraction
 from .params import EnvParams, EnvState, Structure
 from .spaces import Box
 
@@ -136,6 +137,9 @@ class DObsMultiAgentEnv:
                 "gamma": state.gamma[self._links], "gamma_s": state.gamma_s[self._links]}
         if st.task_positions is not None:
             info[st.task_error_key] = jnp.broadcast_to(_core.task_error(state, st), (K,))
+        if st.faults is not None:  # as the PettingZoo env's co_received / oo_received_fraction
+            info["co_received"] = feat.received.co_rx
+            info["oo_received_fraction"] = received_fraction(st.faults, feat.received.oo_rx)
         info["termination_reason"] = jnp.broadcast_to(reason, (K,))
         return info
 

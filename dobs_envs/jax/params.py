@@ -28,6 +28,7 @@ from flax import struct
 
 from ..envs.distributions import DEFAULT_INIT_NOISE
 from ..envs.env_core import REWARD_CODES
+from .faults import FaultParams, FaultState, FaultStructure, from_fault_args
 from .operators import patterns_of
 
 __all__ = ["EnvParams", "EnvState", "Structure", "from_core", "DISTURBANCE_CODES"]
@@ -67,6 +68,7 @@ class EnvParams:
         :attr:`Structure.x0_uniform`, else ``x0 + U[-init_noise, init_noise]^n``.
     v0 (m_v,), disturbance_amplitude : the unknown input's reset.
     x_r0 (n,) : the reference model's initial state.
+    faults : the numbers of the communication faults (:class:`~dobs_envs.jax.faults.FaultParams`), or None.
     """
 
     A: jax.Array
@@ -106,6 +108,7 @@ class EnvParams:
     v0: jax.Array
     disturbance_amplitude: jax.Array
     x_r0: jax.Array
+    faults: FaultParams | None = None
 
 
 @struct.dataclass
@@ -122,6 +125,7 @@ class EnvState:
     time : control steps since reset (int32).
     sig (3, m_v, L) : amplitudes, frequencies and phases of the ``"random"`` disturbance
         (zeros otherwise).
+    fault : the communication faults' state (:class:`~dobs_envs.jax.faults.FaultState`), or None.
     """
 
     t: jax.Array
@@ -134,6 +138,7 @@ class EnvState:
     u: jax.Array
     time: jax.Array
     sig: jax.Array
+    fault: FaultState | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +169,8 @@ class Structure:
     dtype : the float dtype of the simulation.
     sparse : the products run over the nonzeros of the system's matrices (:mod:`dobs_envs.jax.operators`).
     patterns : those nonzeros (:func:`~dobs_envs.jax.operators.patterns_of`).
+    faults : the static part of the communication faults (:class:`~dobs_envs.jax.faults.FaultStructure`),
+        or None (``faults=None``: no fault code is traced).
     """
 
     n: int
@@ -195,6 +202,7 @@ class Structure:
     dtype: np.dtype
     sparse: bool
     patterns: dict
+    faults: FaultStructure | None = None
 
 
 def from_core(core, *, max_steps_in_episode: int, dtype, sparse: bool = True) -> tuple[Structure, EnvParams]:
@@ -203,10 +211,6 @@ def from_core(core, *, max_steps_in_episode: int, dtype, sparse: bool = True) ->
     ``dtype``: ``jnp.float64`` (needs ``jax_enable_x64``) or ``jnp.float32``; the arrays are built in
     float64 by the numpy design code and cast once here.
     """
-    if core.faults is not None:
-        raise NotImplementedError(
-            "faults: the JAX environments do not simulate communication faults yet; build the env with "
-            "faults=None (TrackingLossy-v0 is Tracking-v0 with faults on)")
     p, sc, L = core.params, core.scenario, core.layout
     n, N, m, m_v = core.n_states, core.n_nodes, core.n_inputs, core.n_unknown
     te = getattr(core, "_task_error", None)
@@ -224,6 +228,9 @@ def from_core(core, *, max_steps_in_episode: int, dtype, sparse: bool = True) ->
     if core.has_reference:
         ref[0], ref[1], ref[2] = sc.reference.amplitude, sc.reference.frequency, sc.reference.phase
     dist = core.distribution
+    fst = fpar = None
+    if core.faults is not None:  # the compiled core's resolved fault constants (its links and rates)
+        fst, fpar = from_fault_args(core._fa, core.links, n, dtype)
     structure = Structure(
         n=n, N=N, m=m, m_v=m_v, p=pw, K=core.n_agents, substeps=int(core.substeps),
         has_reference=bool(core.has_reference), reward_code=REWARD_CODES[core.reward_kind],
@@ -234,7 +241,8 @@ def from_core(core, *, max_steps_in_episode: int, dtype, sparse: bool = True) ->
         obs_dtype=np.dtype(core.obs_dtype), action_widths=tuple(int(w) for w in core.agent_action_widths),
         action_gather=np.asarray(core.action_gather, dtype=np.intp), normalized_actions=bool(core.normalized_actions),
         task_positions=positions, task_error_key=core.task_error_key, agents=tuple(core.agents),
-        links=tuple(int(i) for i in core.links), dtype=np.dtype(dtype), sparse=bool(sparse), patterns={})
+        links=tuple(int(i) for i in core.links), dtype=np.dtype(dtype), sparse=bool(sparse), patterns={},
+        faults=fst)
     Q = np.asarray(core.Q, dtype=np.float64)
     lam_q = float(np.linalg.eigvalsh(0.5 * (Q + Q.T))[-1])
     f = lambda a: jnp.asarray(np.asarray(a, dtype=np.float64), dtype=dtype)  # noqa: E731
@@ -255,6 +263,6 @@ def from_core(core, *, max_steps_in_episode: int, dtype, sparse: bool = True) ->
         init_noise=f(DEFAULT_INIT_NOISE if dist.init_noise is None else dist.init_noise),
         v0=f(np.zeros(m_v) if sc.v0 is None else np.reshape(sc.v0, (m_v,))),
         disturbance_amplitude=f(core.disturbance_amplitude),
-        x_r0=f(sc.x_r0 if sc.x_r0 is not None else np.zeros(n)))
+        x_r0=f(sc.x_r0 if sc.x_r0 is not None else np.zeros(n)), faults=fpar)
     structure.patterns.update(patterns_of(params, sparse=sparse))
     return structure, params

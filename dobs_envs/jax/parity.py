@@ -18,6 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import core as _core
+from . import faults as _faults
+from .faults import FaultState
 from .params import EnvState
 
 __all__ = ["state_from_core", "advance_fn", "one_step_episode", "free_run_episode", "QUANTITIES"]
@@ -25,15 +27,26 @@ __all__ = ["state_from_core", "advance_fn", "one_step_episode", "free_run_episod
 #: the quantities compared by :func:`one_step_episode`
 QUANTITIES = ("t", "x", "x_r", "v", "z", "gamma", "gamma_s", "obs", "reward", "estimation_errors",
               "tracking_error", "task_error")
+#: with faults: the fault state's real arrays (compared as :data:`QUANTITIES`, under ``"fault"``) and its draws
+#: and counters (compared for equality, mismatches counted under ``"draws"`` with the received flags)
+_FAULT_REAL = ("received", "snapshots", "noise", "co_sent", "co_held")
+_FAULT_DISCRETE = ("seed", "period", "bad", "graph")
 
 
 def state_from_core(core, c: int, dtype) -> EnvState:
     """Copy ``c`` of the compiled core as a JAX state (``dtype`` the float type)."""
     s = core.sim_state
     f = lambda a: jnp.asarray(np.asarray(a, dtype=np.float64), dtype=dtype)  # noqa: E731
+    fault = None
+    if core.faults is not None:
+        fs = core.fault_state
+        fault = FaultState(seed=jnp.asarray(fs.seed[c], jnp.uint64), period=jnp.asarray(fs.period[c], jnp.int64),
+                           received=f(fs.received[c]), snapshots=f(fs.snapshots[c]), bad=jnp.asarray(fs.bad[c]),
+                           graph=jnp.asarray(fs.graph[c], jnp.int64), noise=f(fs.noise[c]), co_sent=f(fs.co_sent[c]),
+                           co_held=f(fs.co_held[c]))
     return EnvState(t=f(s.t[c]), x=f(s.x[c]), z=f(s.z[c]), gamma=f(s.gamma[c]), gamma_s=f(s.gamma_s[c]),
                     v=f(s.v[c]), x_r=f(s.x_r[c]), u=f(core.applied_inputs[c]),
-                    time=jnp.asarray(int(core.cycles[c]), jnp.int32), sig=f(core._sig[:, c]))
+                    time=jnp.asarray(int(core.cycles[c]), jnp.int32), sig=f(core._sig[:, c]), fault=fault)
 
 
 _ADVANCE = {}
@@ -65,7 +78,10 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
     -> u (m,)``; at each step the JAX form advances the core's state with the same input.
 
     Returns ``{quantity: largest difference}`` (module doc), with ``"steps"`` the steps run and
-    ``"ends"`` the number of mismatched terminated / truncated / reason values (0 expected).
+    ``"ends"`` the number of mismatched terminated / truncated / reason values (0 expected). With faults
+    also ``"fault"`` (the fault state's held copies, snapshots, noise and C-O buffers) and ``"draws"`` (the
+    steps whose graph, burst states, counters or received flags differ: 0 expected, the draws being the
+    same counter-based generator).
     ``max_z_diff(state, structure, params) -> float``, if given, records under ``"z_band"`` the largest
     ratio of the observer states' difference to that bound.
     """
@@ -73,6 +89,8 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
     core.reset(None, [seed])
     worst = dict.fromkeys(QUANTITIES, 0.0)
     worst.update(ends=0, z_band=0.0)
+    if structure.faults is not None:
+        worst.update(fault=0.0, draws=0)
     k = 0
     for k in range(steps):
         u = np.asarray(inputs(core, k), dtype=np.float64)
@@ -92,6 +110,14 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
                                          _rel(out.features.estimation_errors, core.estimation_errors[0]))
         worst["tracking_error"] = max(worst["tracking_error"], _rel(out.features.tracking_error,
                                                                    core.tracking_errors[0]))
+        if structure.faults is not None:  # the fault state and what the agents received
+            fs, rx = core.fault_state, out.features.received
+            worst["fault"] = max([worst["fault"]] + [_rel(getattr(ns.fault, q), getattr(fs, q)[0]) for q in _FAULT_REAL])
+            worst["draws"] += sum(int(not np.array_equal(np.asarray(getattr(ns.fault, q)), getattr(fs, q)[0]))
+                                  for q in _FAULT_DISCRETE)
+            worst["draws"] += int(not np.array_equal(np.asarray(rx.co_rx), core.co_received[0]))
+            worst["draws"] += int(not np.allclose(np.asarray(_faults.received_fraction(structure.faults, rx.oo_rx)),
+                                                  core.oo_received_fraction[0], rtol=0.0, atol=1e-15))
         te = _core.task_error(ns, structure)
         if te is not None:
             worst["task_error"] = max(worst["task_error"], _rel(te, core.task_errors()[0]))
@@ -110,7 +136,9 @@ def free_run_episode(penv, structure, params, make_policy, *, seed: int, dtype=j
     obs, _ = penv.reset(seed=seed)
     core = penv.core
     s = core.sim_state
-    js = _core.initial_state(params, structure, s.x[0], v0=s.v[0], x_r0=s.x_r[0], sig=core._sig[:, 0])
+    seed = core.fault_state.seed[0] if core.faults is not None else None
+    js = _core.initial_state(params, structure, s.x[0], v0=s.v[0], x_r0=s.x_r[0], sig=core._sig[:, 0],
+                             fault_seed=seed)
     adv = advance_fn(structure)
     pa, pb = make_policy(penv), make_policy(penv)
     agents, widths = structure.agents, structure.obs_widths
