@@ -83,14 +83,15 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
     steps whose graph, burst states, counters or received flags differ: 0 expected, the draws being the
     same counter-based generator).
     ``max_z_diff(state, structure, params) -> float``, if given, records under ``"z_band"`` the largest
-    ratio of the observer states' difference to that bound.
+    ratio of the observer states' difference to that bound (with faults also ``"fault_band"``: the held
+    estimates', broadcast at instants inside the period).
     """
     adv = advance_fn(structure)
     core.reset(None, [seed])
     worst = dict.fromkeys(QUANTITIES, 0.0)
     worst.update(ends=0, z_band=0.0)
     if structure.faults is not None:
-        worst.update(fault=0.0, draws=0)
+        worst.update(fault=0.0, draws=0, fault_band=0.0)
     k = 0
     for k in range(steps):
         u = np.asarray(inputs(core, k), dtype=np.float64)
@@ -113,6 +114,10 @@ def one_step_episode(core, structure, params, inputs, *, seed: int, steps: int, 
         if structure.faults is not None:  # the fault state and what the agents received
             fs, rx = core.fault_state, out.features.received
             worst["fault"] = max([worst["fault"]] + [_rel(getattr(ns.fault, q), getattr(fs, q)[0]) for q in _FAULT_REAL])
+            if max_z_diff is not None:  # held estimates: as close as the observers within the period
+                df = max(float(np.max(np.abs(np.asarray(getattr(ns.fault, q)) - getattr(fs, q)[0]), initial=0.0))
+                         for q in _FAULT_REAL)
+                worst["fault_band"] = max(worst["fault_band"], df / band)
             worst["draws"] += sum(int(not np.array_equal(np.asarray(getattr(ns.fault, q)), getattr(fs, q)[0]))
                                   for q in _FAULT_DISCRETE)
             worst["draws"] += int(not np.array_equal(np.asarray(rx.co_rx), core.co_received[0]))
