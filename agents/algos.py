@@ -31,8 +31,8 @@ One :class:`AlgoBackend` in :data:`BACKENDS`, e.g. sb3-contrib's TQC::
 
     AlgoBackend("tqc", library="sb3-contrib", module="sb3_contrib", class_name="TQC")
 
-plus its recipe file ``agents/hyperparams/<name>.yaml`` and the name in
-:data:`agents.config.ALGOS` (and :data:`agents.config.MULTI_AGENT_ALGOS` when it may be
+plus its recipe file ``agents/config/hyperparams/<name>.yaml`` and the name in
+:data:`agents.config.hyperparam_files.ALGOS` (and :data:`agents.config.hyperparam_files.MULTI_AGENT_ALGOS` when it may be
 parameter-shared). Names are lowercase letters and digits: they appear in the checkpoint
 file names ``<name>_<steps>_steps.zip``.
 """
@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .config import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
+from .config.hyperparam_files import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
 
 if TYPE_CHECKING:
     from .recipes import Recipe
@@ -97,7 +97,7 @@ def _activation_name(act: str) -> str:
 
 def torch_policy_kwargs(pk: dict | None) -> dict:
     """A recipe's ``policy_kwargs`` for a torch policy: ``activation_fn`` named (``"tanh"``,
-    :data:`agents.config.ACTIVATIONS`) becomes the ``torch.nn`` class (``nn.Tanh``)."""
+    :data:`agents.config.hyperparam_files.ACTIVATIONS`) becomes the ``torch.nn`` class (``nn.Tanh``)."""
     import torch.nn as nn
 
     pk = dict(pk or {})
@@ -136,7 +136,7 @@ def _episode_length(venv, default: int = 1000) -> int:
 
 
 def make_action_noise(noise_type: str, sigma: float, venv, seed: int | None = None):
-    """The exploration noise ``noise_type`` of :data:`agents.config.NOISE_TYPES` (added to the actions of
+    """The exploration noise ``noise_type`` of :data:`agents.config.hyperparam_files.NOISE_TYPES` (added to the actions of
     TD3 / SAC / CrossQ, in the agent's action units), one independent process per environment copy of ``venv``.
 
     - ``normal``: white Gaussian noise ``N(0, sigma^2)`` per step (SB3's ``NormalActionNoise``);
@@ -321,7 +321,7 @@ def _sbx(name: str, cls: str) -> AlgoBackend:
                        extra="jax")
 
 
-#: the implementations of each algorithm name (the names of :data:`agents.config.ALGOS`), preferred
+#: the implementations of each algorithm name (the names of :data:`agents.config.hyperparam_files.ALGOS`), preferred
 #: first. SBX first for the off-policy algorithms: measured side by side on tracking
 #: (benchmarks/offpolicy_throughput.py; figures in the README and the recipe files).
 BACKENDS: dict[str, tuple[AlgoBackend, ...]] = {

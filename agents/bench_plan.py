@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass, field
 
 from .algos import LEGACY_LIBRARY, backend
-from .config import ENVS, TASKS
+from .config.envs import ENVS, TASKS
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
@@ -298,8 +298,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
     written). With :func:`pending_runs` it tells which of them a stored result already answers.
 
-    ``env``: a registered name (:data:`agents.config.ENVS`) or ``"all"``: the fault-free tasks
-    (:data:`agents.config.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
+    ``env``: a registered name (:data:`agents.config.envs.ENVS`) or ``"all"``: the fault-free tasks
+    (:data:`agents.config.envs.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
     them again under faults and is run by its name).
 
     ``seeds``: the number of training runs of every agent (``seed, seed + 1, ...``; default the
@@ -314,11 +314,11 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
     ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
-    :class:`agents.config.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has no
+    :class:`agents.config.hyperparam_files.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has no
     section for an env."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
-    env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.TASKS)
+    env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.envs.TASKS)
     for e in env_names:
         if e not in ENVS:
             raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
@@ -365,11 +365,11 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
 
 
 def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:
-    """:class:`agents.config.HyperparamsError` naming the keys of the recipe file ``path`` that ``agent``'s
+    """:class:`agents.config.hyperparam_files.HyperparamsError` naming the keys of the recipe file ``path`` that ``agent``'s
     algorithm class does not take, before anything trains (every run would fail the same way)."""
     import inspect
 
-    from .config import HyperparamsError
+    from .config.hyperparam_files import HyperparamsError
     from .recipes import resolve_recipe
 
     a = AGENTS[agent]

@@ -14,7 +14,7 @@ import numpy as np
 
 from .bench_plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
 from .bench_tasks import mean_trajectory
-from .config import FAULT_FREE
+from .config.envs import FAULT_FREE
 from .evaluate import STEADY_S, TRANSIENT_S
 from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
 
@@ -42,7 +42,7 @@ STATISTICS_DOC = (
 DEGRADATION_DOC = (
     "degradation = J_policy / J_paper,fault-free: the policy's cost on the environment with communication faults over "
     "the cost of the paper's controller on its fault-free counterpart (the same task with faults=None, "
-    "agents.config.FAULT_FREE) on the same episode: the same seed gives the same initial state and reference (the "
+    "agents.config.envs.FAULT_FREE) on the same episode: the same seed gives the same initial state and reference (the "
     "faulted environment draws its fault seed last from the episode's generator; the report checks x(0)). One "
     "yardstick for every row: 1 is what the paper's controller achieves on the ideal network, the paper's own row is "
     "its degradation under the faults. Statistics as for J / J_paper: a run's score is the mean over the episodes; IQM "
@@ -392,7 +392,7 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
 
     ``results``: ``{(env, agent, seed): run payload}`` for every run of ``plan``; ``analytic``: the
     analytic controllers' payloads on ``env`` by label (:func:`agents.bench_tasks.analytic_results`);
-    ``fault_free``: for an environment with communication faults (:data:`agents.config.FAULT_FREE`, where it
+    ``fault_free``: for an environment with communication faults (:data:`agents.config.envs.FAULT_FREE`, where it
     is required), the paper's controller's payload on the fault-free counterpart
     (:func:`agents.bench_tasks.fault_free_paper`): every row then has the degradation columns
     (:data:`DEGRADATION_DOC`) and ``results.json`` the counterpart's episodes under ``fault_free``."""

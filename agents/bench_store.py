@@ -12,7 +12,7 @@ import json
 import os
 
 from .bench_plan import BUDGETS, is_agent_name
-from .config import ENVS
+from .config.envs import ENVS
 from .runs import clear_run
 
 __all__ = ["MARKER", "OutDirError", "foreign_entries", "claim_out_dir", "RECORD_FILES", "write_record",

@@ -22,7 +22,7 @@ import numpy as np
 
 from .bench_plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
 from .bench_store import RECORD_FILES, read_run_files
-from .config import FAULT_FREE, gym_factory, parallel_factory
+from .config.envs import FAULT_FREE, gym_factory, parallel_factory
 from .evaluate import evaluate_policy
 
 __all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
@@ -133,7 +133,7 @@ def analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) 
 
 
 def fault_free_paper(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
-    """The paper's controller on the fault-free counterpart of ``env`` (:data:`agents.config.FAULT_FREE`: the
+    """The paper's controller on the fault-free counterpart of ``env`` (:data:`agents.config.envs.FAULT_FREE`: the
     same task with ``faults=None``) on the episodes ``eval_seed + k``: its evaluation payload, the reference
     ``J_paper,fault-free`` of the degradation columns (:mod:`agents.bench_report`). The same seed gives the
     same episode in both environments (initial state, reference; the faulted environment draws its fault

@@ -8,7 +8,7 @@
    (``--backend``: worker processes by default, ``--workers`` of them, one per core; or Ray
    tasks on a local Ray or a cluster, :mod:`agents.bench_exec`): pure RL (centralised PPO,
    parameter-shared PPO; ``full`` adds SAC, TD3 and PPO trained on the sqrt cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
-   behaviour cloning), each with the recipe of ``agents/hyperparams/<algo>.yaml``; ``--recipe
+   behaviour cloning), each with the recipe of ``agents/config/hyperparams/<algo>.yaml``; ``--recipe
    AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
    tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
    Each run records its learning curve (:mod:`agents.curves`). A finished run is
@@ -63,7 +63,7 @@ from .bench_store import (MARKER, OutDirError, claim_out_dir, foreign_entries, r
                           write_record)
 from .bench_tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate
 from .bench_tasks import mean_trajectory as _mean_trajectory  # noqa: F401  (the name of earlier releases)
-from .config import FAULT_FREE
+from .config.envs import FAULT_FREE
 
 __all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "reevaluated_runs", "replaced_runs",
            "BenchmarkPlan", "RunConflictError", "format_table", "AgentSpec", "BACKENDS", "OutDirError", "MARKER",

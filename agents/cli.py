@@ -14,7 +14,8 @@ from dobs_envs.paths import OutputPathError, check_output_dir, check_output_file
 from .bench_exec import BACKENDS
 from .bench_plan import AGENTS, BUDGETS
 from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
-from .config import ALGOS, ENVS, FAULT_FREE, TASKS
+from .config.hyperparam_files import ALGOS
+from .config.envs import ENVS, FAULT_FREE, TASKS
 
 __all__ = ["add_parser"]
 
@@ -236,7 +237,8 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 
 
 def _train(args) -> int:
-    from .config import EnvNameError, HyperparamsError, check_env_name
+    from .config.envs import EnvNameError, check_env_name
+    from .config.hyperparam_files import HyperparamsError
     from .runs import default_run_dir
     from .train import train
 
@@ -313,7 +315,7 @@ def _occupied_run_dir(out: str) -> str:
 
 def _resume(args) -> int:
     """``train --resume DIR``: the run's own configuration; options that define a run must agree with it."""
-    from .config import EnvNameError, env_key
+    from .config.envs import EnvNameError, env_key
     from .runs import RunDirError, read_run_config, resume_point
     from .train import resume
 
@@ -359,7 +361,7 @@ def _resume(args) -> int:
 
 
 def _evaluate(args) -> int:
-    from .config import EnvNameError
+    from .config.envs import EnvNameError
     from .evaluate import evaluate_model
     from .runs import RunDirError
 
@@ -387,7 +389,7 @@ def _benchmark(args) -> int:
     from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
 
     from .bench_plan import RECIPE_SUFFIX
-    from .config import HyperparamsError
+    from .config.hyperparam_files import HyperparamsError
 
     t0 = time.perf_counter()
     recipes = {}
@@ -521,7 +523,7 @@ _TUNE_OPTIONS = {"env": ("env", "tracking"), "algo": ("algo", "ppo"), "trials": 
 
 def _tune(args) -> int:
     """``dobs-envs tune``: a Ray Tune study (:mod:`agents.tune`)."""
-    from .config import HyperparamsError
+    from .config.hyperparam_files import HyperparamsError
 
     try:
         import optuna  # noqa: F401

@@ -22,7 +22,7 @@ def paper_costs(env_name: str, env_kwargs: dict, seeds, *, parallel: bool = True
     """The paper controller's episode cost ``J = -return`` on each of ``seeds``."""
     from baselines.policies import SeparationPolicy
 
-    from .config import parallel_factory
+    from .config.envs import parallel_factory
     from .evaluate import run_episode
 
     env = parallel_factory(env_name, env_kwargs)()
@@ -43,7 +43,7 @@ def make_curve_callback(env_name: str, env_kwargs: dict, seeds, every: int, *, n
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from .config import gym_factory, parallel_factory
+    from .config.envs import gym_factory, parallel_factory
     from .evaluate import run_episode
     from .loading import TrainedAgent
 

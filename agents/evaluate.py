@@ -207,12 +207,12 @@ def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True
     the summary names the model file (``model``).
 
     The environment named in the run's ``config.json`` must be a registered one
-    (:func:`agents.config.check_env_name`); a ``module:attr`` name is refused unless
+    (:func:`agents.config.envs.check_env_name`); a ``module:attr`` name is refused unless
     ``allow_custom_env`` (a file must never make us import code). ``model.zip`` and
     ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`; a refused
     class raises :class:`agents.run_pickles.PickleRefused`).
     """
-    from .config import check_env_name, gym_factory, parallel_factory
+    from .config.envs import check_env_name, gym_factory, parallel_factory
     from .loading import load_agent
     from .runs import read_run_config
 

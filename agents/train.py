@@ -38,7 +38,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from .algos import AlgoBackend, BackendUnavailable, backend, backend_of
-from .config import MULTI_AGENT_ALGOS, gym_factory
+from .config.hyperparam_files import MULTI_AGENT_ALGOS
+from .config.envs import gym_factory
 from .core_vec_env import CoreVecEnv
 from .loading import TrainedAgent, load_agent
 from .recipes import Recipe, recipe_from_hyperparams, resolve_recipe
@@ -341,7 +342,7 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     uninterrupted run. An off-policy run resumed from a checkpoint starts with an empty replay
     buffer. Interrupting again works as in :func:`train`.
     """
-    from .config import check_env_name
+    from .config.envs import check_env_name
     from .run_pickles import load_replay_buffer, load_vecnormalize
 
     cfg = read_run_config(path, require_model=False)

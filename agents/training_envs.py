@@ -15,7 +15,7 @@ import numpy as np
 
 from dobs_envs.registry import get as registry_entry
 
-from .config import ENVS, env_key, gym_factory, parallel_factory
+from .config.envs import ENVS, env_key, gym_factory, parallel_factory
 from .core_vec_env import CoreVecEnv
 from .vec_env import ParallelVecEnv
 
@@ -27,7 +27,7 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
                   residual_scale: float | None = None):
     """Monitored VecEnv for training (not normalised).
 
-    ``env`` is a name (see :mod:`agents.config`) or a constructor. The dobs_envs
+    ``env`` is a name (see :mod:`agents.config.hyperparam_files`) or a constructor. The dobs_envs
     environments (by name) run as one batched core, :class:`agents.core_vec_env.CoreVecEnv`
     + ``VecMonitor``: centralised (one slot per copy, episodes of the Gymnasium id's
     ``max_episode_steps`` unless ``max_cycles``/``horizon`` are given) or parameter-shared

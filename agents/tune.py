@@ -4,7 +4,7 @@
 (:class:`SearchSpace`: learning rate and its schedule, rollout / batch sizes, gamma, the policy's
 initial log-std or gSDE, the network size, the recipe's training-only state bound, and
 ``train_freq`` / ``gradient_steps`` for the off-policy algorithms). Every trial is one training run
-(:func:`agents.train.train`, the recipe of ``agents/hyperparams/<algo>.yaml`` with the trial's values
+(:func:`agents.train.train`, the recipe of ``agents/config/hyperparams/<algo>.yaml`` with the trial's values
 merged over it) scored like the benchmark scores a run: the mean over ``episodes`` seeded episodes of
 the cost ratio ``J_policy / J_paper`` on the task's own environment (lower is better), evaluated at
 ``report_points`` points of training (:mod:`agents.curves`) so that ASHA stops the trials that lag
@@ -29,7 +29,7 @@ Output directory ``out``
 - ``best.yml``: the best finished trial's recipe as one rl-zoo3 section named by the Gymnasium id
   (``dobs_envs/HeteroMAS-v0``), complete (every key, as rl-zoo3 reads it alone), with a comment
   header (env, algorithm, trials, score, seeds). ``dobs-envs train --recipe best.yml`` trains with
-  it; pasted over that section of ``agents/hyperparams/<algo>.yaml`` it becomes the benchmark's recipe.
+  it; pasted over that section of ``agents/config/hyperparams/<algo>.yaml`` it becomes the benchmark's recipe.
 
 An interrupted study (Ctrl-C: Tune saves its state; finished trials are kept) continues with
 ``resume=True`` (``Tuner.restore``): finished trials are not run again, unfinished ones restart.
@@ -47,7 +47,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import ALGOS, ENVS, gym_id
+from .config.hyperparam_files import ALGOS
+from .config.envs import ENVS, gym_id
 from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "stored_spec", "check_constructor_keys",
@@ -80,7 +81,7 @@ def _net_name(net_arch) -> str | None:
 
 class SearchSpace:
     """Optuna define-by-run search space of one algorithm around a recipe (``hp``: the merged
-    hyperparameters in :mod:`agents.config`'s vocabulary) for a budget of ``timesteps`` env steps.
+    hyperparameters in :mod:`agents.config.hyperparam_files`'s vocabulary) for a budget of ``timesteps`` env steps.
 
     ``space(trial)`` samples the parameters (Ray's ``OptunaSearch(space=...)``);
     :meth:`overrides` turns the sampled values into hyperparameter overrides (merged over the recipe
@@ -602,7 +603,7 @@ def recipe_section(hp: dict) -> dict:
     """Merged hyperparameters (agents' vocabulary, a run's ``config.json`` ``hyperparams``) as an
     rl-zoo3 section: ``policy_kwargs`` as its ``"dict(...)"`` string with ``nn.<Activation>``,
     ``normalize_actions`` as the ``RescaleAction`` ``env_wrapper``."""
-    from .config import ACTIVATIONS, RESCALE_WRAPPER
+    from .config.hyperparam_files import ACTIVATIONS, RESCALE_WRAPPER
 
     sec = {}
     for k, v in hp.items():
@@ -642,7 +643,7 @@ def write_best_recipe(path: str, spec: StudySpec, best: dict, rows: list[dict], 
            if baseline and rows and rows[0][METRIC] is not None else "the recipe before tuning lies outside the "
                                                                       "search space (not a trial)"),
         f"# use: dobs-envs train --env {spec.env} --algo {spec.algo} --recipe {os.path.basename(path)}; or replace "
-        f"the {gym_id(spec.env)} section of agents/hyperparams/{spec.algo}.yaml with it (the benchmark's recipe)",
+        f"the {gym_id(spec.env)} section of agents/config/hyperparams/{spec.algo}.yaml with it (the benchmark's recipe)",
     ]
     text = yaml.safe_dump({gym_id(spec.env): section}, sort_keys=False, default_flow_style=None)
     with open(path + ".tmp", "w") as fh:

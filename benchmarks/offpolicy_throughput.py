@@ -1,7 +1,7 @@
 """Off-policy training throughput on a dobs_envs task, side by side with PPO (issue 21, item 1).
 
 Candidates (all in one process, on the same machine and run, each from the shipped recipe of its
-algorithm on the task, ``agents/hyperparams/<algo>.yaml``, with the overrides named in its label):
+algorithm on the task, ``agents/config/hyperparams/<algo>.yaml``, with the overrides named in its label):
 
 - ``ppo SB3``: the reference (its recipe: 8 copies on the batched core);
 - ``sac SB3 1 env``: SB3 SAC as shipped (1 copy, one gradient step per env step);

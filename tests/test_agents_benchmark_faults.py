@@ -12,7 +12,7 @@ import pytest
 
 from agents.benchmark import AGENTS, ANALYTIC, BUDGETS, PAPER, plan_runs, run_benchmark
 from agents.bench_report import DEGRADATION_COLUMNS, _fault_free_cost, write_env_report
-from agents.config import TASKS
+from agents.config.envs import TASKS
 from dobs_envs.cli import main
 
 TINY = BUDGETS["tiny"]

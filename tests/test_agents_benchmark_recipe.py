@@ -107,7 +107,7 @@ def test_recipe_usage_errors_exit_2(case, needle, tmp_path, capsys):
 
 
 def test_run_benchmark_rejects_a_file_without_the_env_section(tmp_path):
-    from agents.config import HyperparamsError
+    from agents.config.hyperparam_files import HyperparamsError
 
     f = _recipe(tmp_path / "hetero.yml", "dobs_envs/HeteroMAS-v0")
     with pytest.raises(HyperparamsError, match="has no section 'dobs_envs/Tracking-v0'"):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.config import gym_factory, parallel_factory
+from agents.config.envs import gym_factory, parallel_factory
 from agents.evaluate import evaluate_policy
 from agents.hybrid import (ResidualGymWrapper, ResidualParallelEnv, ResidualPolicy,
                            behaviour_cloning_dataset, pretrain_ppo)

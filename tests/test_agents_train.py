@@ -11,7 +11,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from agents.algos import BACKENDS, LEGACY_LIBRARY, backend
-from agents.config import ALGOS, load_hyperparams
+from agents.config.hyperparam_files import ALGOS, load_hyperparams
 from agents.loading import load_agent
 from agents.train import train
 

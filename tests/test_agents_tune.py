@@ -16,7 +16,8 @@ ray = pytest.importorskip("ray")
 pytest.importorskip("ray.tune")
 pytest.importorskip("optuna")
 
-from agents.config import gym_id, read_hyperparams_file  # noqa: E402
+from agents.config.envs import gym_id  # noqa: E402
+from agents.config.hyperparam_files import read_hyperparams_file  # noqa: E402
 from agents.recipes import resolve_recipe  # noqa: E402
 from agents.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
 from agents.tune import SearchSpace, StudySpec, run_study  # noqa: E402

@@ -105,7 +105,7 @@ def test_genuine_run_evaluates_as_before(run_dir):
     normalised observations, the same evaluation episodes."""
     from stable_baselines3 import PPO
 
-    from agents.config import gym_factory
+    from agents.config.envs import gym_factory
     from agents.evaluate import evaluate_policy, summarise
     from agents.loading import TrainedAgent, load_agent
 
