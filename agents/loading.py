@@ -2,7 +2,7 @@
 or one of its checkpoints) into a :class:`TrainedAgent`, which acts on the task's own environment.
 
 Observations are normalised with the statistics saved with the model (``vecnormalize.pkl``); a
-multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEncoder` (the padding and
+multi-agent (parameter-shared) agent acts through :class:`agents.vecenv.slots.SlotEncoder` (the padding and
 one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
 loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`).
 ``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`:
@@ -18,7 +18,7 @@ import numpy as np
 from .algos import BackendUnavailable, backend_of
 from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
-from .vec_env import SlotEncoder
+from .vecenv.slots import SlotEncoder
 
 __all__ = ["TrainedAgent", "load_agent"]
 
@@ -28,7 +28,7 @@ class TrainedAgent:
 
     ``central_policy()`` -> ``obs -> action`` (Gymnasium env);
     ``parallel_policy(env)`` -> ``{agent: obs} -> {agent: action}`` (PettingZoo env,
-    shared policy, same padding/one-hot as :class:`agents.vec_env.ParallelVecEnv`).
+    shared policy, same padding/one-hot as :class:`agents.vecenv.parallel.ParallelVecEnv`).
     """
 
     @classmethod

@@ -8,7 +8,7 @@
 This module is the training loop: :func:`train` (a new run) and :func:`resume` (an interrupted
 one) build the run from its recipe (:mod:`agents.recipes`), its VecEnv
 (:func:`agents.training_envs.build_vec_env`: the dobs_envs environments train on
-:class:`agents.core_vec_env.CoreVecEnv`, all copies in one batched core) and the algorithm's
+:class:`agents.vecenv.batched_core.CoreVecEnv`, all copies in one batched core) and the algorithm's
 implementation (:mod:`agents.algos`), learn, and save the run directory (:mod:`agents.runs`);
 :func:`agents.loading.load_agent` reads it back.
 
@@ -40,7 +40,7 @@ from typing import Any
 from .algos import AlgoBackend, BackendUnavailable, backend, backend_of
 from .config.hyperparam_files import MULTI_AGENT_ALGOS
 from .config.envs import gym_factory
-from .core_vec_env import CoreVecEnv
+from .vecenv.batched_core import CoreVecEnv
 from .loading import TrainedAgent, load_agent
 from .recipes import Recipe, recipe_from_hyperparams, resolve_recipe
 from .runs import (COMPLETE, INTERRUPTED, RUNNING, ResumePoint, RunDirError, RunFiles, clear_run, default_run_dir,

@@ -1,10 +1,10 @@
 """The VecEnv a training run steps: :func:`build_vec_env` (and :func:`core_of`, the batched core
 of a dobs_envs environment).
 
-The dobs_envs environments train on :class:`agents.core_vec_env.CoreVecEnv` (all copies in one
+The dobs_envs environments train on :class:`agents.vecenv.batched_core.CoreVecEnv` (all copies in one
 batched core, centralised or one slot per (copy, agent)); foreign Gymnasium ids, environment
 constructors and the residual environments of :mod:`agents.hybrid` on SB3's ``DummyVecEnv``
-(centralised) or :class:`agents.vec_env.ParallelVecEnv` (multi-agent). Normalisation
+(centralised) or :class:`agents.vecenv.parallel.ParallelVecEnv` (multi-agent). Normalisation
 (``VecNormalize``) is added by :func:`agents.train.train`, not here.
 """
 from __future__ import annotations
@@ -16,8 +16,8 @@ import numpy as np
 from dobs_envs.registry import get as registry_entry
 
 from .config.envs import ENVS, env_key, gym_factory, parallel_factory
-from .core_vec_env import CoreVecEnv
-from .vec_env import ParallelVecEnv
+from .vecenv.batched_core import CoreVecEnv
+from .vecenv.parallel import ParallelVecEnv
 
 __all__ = ["build_vec_env", "core_of"]
 
@@ -28,7 +28,7 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
     """Monitored VecEnv for training (not normalised).
 
     ``env`` is a name (see :mod:`agents.config.hyperparam_files`) or a constructor. The dobs_envs
-    environments (by name) run as one batched core, :class:`agents.core_vec_env.CoreVecEnv`
+    environments (by name) run as one batched core, :class:`agents.vecenv.batched_core.CoreVecEnv`
     + ``VecMonitor``: centralised (one slot per copy, episodes of the Gymnasium id's
     ``max_episode_steps`` unless ``max_cycles``/``horizon`` are given) or parameter-shared
     (one slot per (copy, agent)). Foreign Gymnasium ids and residual envs use ``DummyVecEnv``

@@ -3,7 +3,7 @@
 Both are trained in one process with identical settings: 16 environment copies, the same
 PPO hyperparameters (n_steps, batch size, epochs, network, torch threads), no
 normalisation, ``VecMonitor``/``Monitor`` episode statistics. Tracking runs on
-:class:`agents.core_vec_env.CoreVecEnv` (all 16 copies advanced by one compiled call,
+:class:`agents.vecenv.batched_core.CoreVecEnv` (all 16 copies advanced by one compiled call,
 built by ``agents.training_envs.build_vec_env``); Pendulum on SB3's ``DummyVecEnv`` of 16
 Gymnasium envs (what ``make_vec_env`` gives every other Gymnasium id). The runs alternate
 (tracking, pendulum, tracking, ...) and the best of each is kept, so the ratio

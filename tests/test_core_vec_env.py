@@ -1,4 +1,4 @@
-"""The SB3 VecEnv over the batched core (agents.core_vec_env.CoreVecEnv): the same streams as
+"""The SB3 VecEnv over the batched core (agents.vecenv.batched_core.CoreVecEnv): the same streams as
 today's DummyVecEnv of Gymnasium envs (centralised) and ParallelVecEnv of PettingZoo envs
 (parameter-shared), autoreset/terminal observations, truncation flags, seeding, training."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 import dobs_envs  # noqa: F401
-from agents.core_vec_env import CoreVecEnv
+from agents.vecenv.batched_core import CoreVecEnv
 from agents.training_envs import build_vec_env, core_of
-from agents.vec_env import ParallelVecEnv
+from agents.vecenv.parallel import ParallelVecEnv
 from dobs_envs import hetero_mas_v0, random_network_v0, tracking_v0
 from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
 
