@@ -12,9 +12,9 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from .algos import LEGACY_LIBRARY, backend
+from .training.algos import LEGACY_LIBRARY, backend
 from .config.envs import ENVS, TASKS
-from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from .training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
            "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
@@ -120,7 +120,7 @@ ANALYTIC_INFO = {"paper (separation)": "own observer's estimate",
                  "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
 ANALYTIC = tuple(ANALYTIC_INFO)
 PAPER = ANALYTIC[0]
-CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/seeds.py)
+CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/training/seeds.py)
 
 
 # ---------------------------------------------------------------------- what a stored run answers
@@ -140,7 +140,7 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
     affected runs instead of reusing results of the old recipe. None otherwise.
 
     ``library``: the run must also have been trained by this implementation (``config.json``
-    ``library``; :data:`agents.algos.LEGACY_LIBRARY` for runs that record none), so that installing
+    ``library``; :data:`agents.training.algos.LEGACY_LIBRARY` for runs that record none), so that installing
     or removing the ``jax`` extra (SBX instead of SB3) never passes one library's result off as another's.
 
     ``training_only``: compare only the signature's :data:`TRAINING_KEYS` (the run was trained as
@@ -168,7 +168,7 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
 def _training_overrides(spec: dict) -> dict:
     """The budget's hyperparameter overrides of a run plus its agent's training-only env options; a
     recipe-file agent's: its file's section with the budget's overrides over it (as over the shipped recipe)."""
-    from .recipes import merge_overrides
+    from .training.recipes import merge_overrides
 
     a = agent_spec(spec["agent"])
     hp = merge_overrides(spec.get("recipe"), spec["hp"])
@@ -180,7 +180,7 @@ def _training_overrides(spec: dict) -> dict:
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
     (``training_only``: see :func:`_finished_run`)."""
-    from .recipes import resolve_recipe
+    from .training.recipes import resolve_recipe
 
     a = agent_spec(spec["agent"])
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
@@ -309,7 +309,7 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
 
     ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
     Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
-    budget's steps, but with the file's section for the env (:func:`agents.recipes.recipe_file_section`:
+    budget's steps, but with the file's section for the env (:func:`agents.training.recipes.recipe_file_section`:
     the Gymnasium id's, else ``default``; the budget's overrides apply over it as over the shipped
     recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
@@ -331,12 +331,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    # the three seed ranges (agents/seeds.py): training seeds, evaluation episodes, tuning episodes
+    # the three seed ranges (agents/training/seeds.py): training seeds, evaluation episodes, tuning episodes
     check_training_seeds(seed, max([n_seeds, *counts.values()]), name="seed")
     eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
     curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
-    from .recipes import merge_overrides, recipe_file_section
+    from .training.recipes import merge_overrides, recipe_file_section
 
     # the files' sections, read and validated once per env (nothing named in a file is imported)
     sections = {(k, e): recipe_file_section(f, e) for k, f in recipes.items() for e in env_names}
@@ -370,7 +370,7 @@ def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) ->
     import inspect
 
     from .config.hyperparam_files import HyperparamsError
-    from .recipes import resolve_recipe
+    from .training.recipes import resolve_recipe
 
     a = AGENTS[agent]
     recipe = resolve_recipe(a.algo, env, multi_agent=a.multi_agent, hybrid=a.hybrid, overrides=overrides)

@@ -13,7 +13,7 @@ import os
 
 from .bench_plan import BUDGETS, is_agent_name
 from .config.envs import ENVS
-from .runs import clear_run
+from .training.runs import clear_run
 
 __all__ = ["MARKER", "OutDirError", "foreign_entries", "claim_out_dir", "RECORD_FILES", "write_record",
            "read_run_files"]
@@ -25,7 +25,7 @@ MARKER = ".dobs-envs-benchmark"
 #: files the benchmark writes at the top level of ``out`` and in ``out/<env>``
 _TOP_FILES = ("summary.json", "summary.png")
 _ENV_FILES = ("results.json", "results.md", "results.csv", "error_norms.png", "learning_curves.png")
-#: files a training run (``agents.train``) and the benchmark write in a run directory
+#: files a training run (``agents.training.train``) and the benchmark write in a run directory
 _RUN_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "result.json")
 
 
@@ -134,7 +134,7 @@ def claim_out_dir(out: str, *, overwrite: bool = False) -> None:
 #: the files of a trained run a worker returns (``result.json`` is the record's ``result``, written last);
 #: the benchmark trains without checkpoints, and a complete run keeps no replay buffer
 RECORD_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "curve.json")
-#: the files a kept model is evaluated again from (:func:`agents.loading.load_agent`)
+#: the files a kept model is evaluated again from (:func:`agents.training.loading.load_agent`)
 MODEL_FILES = ("config.json", "model.zip", "vecnormalize.pkl")
 
 

@@ -59,7 +59,7 @@ def executed_on() -> dict:
 
 def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``run_dir`` on the spec's episodes: the run's ``result.json`` document."""
-    from .loading import load_agent
+    from .training.loading import load_agent
 
     a = agent_spec(spec["agent"])
     agent = load_agent(run_dir)
@@ -75,8 +75,8 @@ def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
 def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
     """Train one (env, agent, seed) run as ``spec`` asks (:func:`agents.bench_plan.plan_runs`), in a
     scratch directory, and evaluate it: the run's record with its files (:data:`RECORD_FILES`)."""
-    from .curves import make_curve_callback
-    from .train import set_threads, train
+    from .training.curves import make_curve_callback
+    from .training.train import set_threads, train
 
     set_threads(spec["threads"])
     a = agent_spec(spec["agent"])
@@ -97,7 +97,7 @@ def reevaluate(spec: dict, files: dict, previous: dict, scratch: str | None = No
     """Evaluate a kept model (``files``: its ``config.json``, ``model.zip`` and ``vecnormalize.pkl`` as
     bytes) on the episodes of ``spec``; ``previous``: its stored result (training time and learning
     curve are kept). The record holds no files: the run's own stay as they are."""
-    from .train import set_threads
+    from .training.train import set_threads
 
     set_threads(spec["threads"])
     with tempfile.TemporaryDirectory(prefix="run-", dir=scratch) as path:

@@ -11,7 +11,7 @@
    behaviour cloning), each with the recipe of ``agents/config/hyperparams/<algo>.yaml``; ``--recipe
    AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
    tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
-   Each run records its learning curve (:mod:`agents.curves`). A finished run is
+   Each run records its learning curve (:mod:`agents.training.curves`). A finished run is
    reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
    so an interrupted benchmark resumes where it stopped.
 2. **Evaluate** every policy -- the trained agents, the paper's separation

@@ -13,7 +13,7 @@ from dobs_envs.paths import OutputPathError, check_output_dir, check_output_file
 
 from .bench_exec import BACKENDS
 from .bench_plan import AGENTS, BUDGETS
-from .seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
+from .training.seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
 from .config.hyperparam_files import ALGOS
 from .config.envs import ENVS, FAULT_FREE, TASKS
 
@@ -209,8 +209,8 @@ _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_age
 
 def _interrupted(out: str, exc: KeyboardInterrupt) -> None:
     """One line on stderr after Ctrl-C, exit status 130 (128 + SIGINT)."""
-    from .runs import RunDirError, resume_point
-    from .train import TrainingInterrupted
+    from .training.runs import RunDirError, resume_point
+    from .training.train import TrainingInterrupted
 
     if isinstance(exc, TrainingInterrupted):
         msg = (f"interrupted after {exc.timesteps_done} of {exc.timesteps} env steps; model, normaliser and config "
@@ -239,14 +239,14 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 def _train(args) -> int:
     from .config.envs import EnvNameError, check_env_name
     from .config.hyperparam_files import HyperparamsError
-    from .runs import default_run_dir
-    from .train import train
+    from .training.runs import default_run_dir
+    from .training.train import train
 
     if args.resume is not None:
         return _resume(args)
     args.algo = args.algo or "ppo"
     args.seed = 0 if args.seed is None else args.seed
-    try:  # a training seed's env copies must not replay evaluation or tuning episodes (agents/seeds.py)
+    try:  # a training seed's env copies must not replay evaluation or tuning episodes (agents/training/seeds.py)
         check_training_seeds(args.seed, 1, name="--seed")
     except ValueError as exc:
         _usage_error(str(exc))
@@ -259,7 +259,7 @@ def _train(args) -> int:
     except EnvNameError as exc:
         _usage_error(str(exc))
     if args.recipe is not None:
-        from .recipes import merge_overrides, recipe_file_section
+        from .training.recipes import merge_overrides, recipe_file_section
 
         try:
             args.hyperparams = merge_overrides(recipe_file_section(args.recipe, env), args.hyperparams)
@@ -291,7 +291,7 @@ def _train(args) -> int:
 def _occupied_run_dir(out: str) -> str:
     """Why ``train --out`` refuses the non-empty directory ``out``: a run (its status, resumable or not)
     or other files (named), and the ways out."""
-    from .runs import RunDirError, read_run_config, resume_point
+    from .training.runs import RunDirError, read_run_config, resume_point
 
     if os.path.isfile(os.path.join(out, "config.json")):
         try:
@@ -316,8 +316,8 @@ def _occupied_run_dir(out: str) -> str:
 def _resume(args) -> int:
     """``train --resume DIR``: the run's own configuration; options that define a run must agree with it."""
     from .config.envs import EnvNameError, env_key
-    from .runs import RunDirError, read_run_config, resume_point
-    from .train import resume
+    from .training.runs import RunDirError, read_run_config, resume_point
+    from .training.train import resume
 
     run = args.resume
     if args.overwrite:
@@ -362,8 +362,8 @@ def _resume(args) -> int:
 
 def _evaluate(args) -> int:
     from .config.envs import EnvNameError
-    from .evaluate import evaluate_model
-    from .runs import RunDirError
+    from .training.loading import evaluate_model
+    from .training.runs import RunDirError
 
     if args.json:
         try:
@@ -549,7 +549,7 @@ def _tune(args) -> int:
         else:
             kw = {field: given.get(dest, default) for dest, (field, default) in _TUNE_OPTIONS.items()}
             if kw["timesteps"] is None:
-                from .recipes import resolve_recipe
+                from .training.recipes import resolve_recipe
 
                 kw["timesteps"] = resolve_recipe(kw["algo"], kw["env"], overrides=kw["hyperparams"] or None).n_timesteps
             spec = StudySpec(**kw)

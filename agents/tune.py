@@ -4,13 +4,13 @@
 (:class:`SearchSpace`: learning rate and its schedule, rollout / batch sizes, gamma, the policy's
 initial log-std or gSDE, the network size, the recipe's training-only state bound, and
 ``train_freq`` / ``gradient_steps`` for the off-policy algorithms). Every trial is one training run
-(:func:`agents.train.train`, the recipe of ``agents/config/hyperparams/<algo>.yaml`` with the trial's values
+(:func:`agents.training.train.train`, the recipe of ``agents/config/hyperparams/<algo>.yaml`` with the trial's values
 merged over it) scored like the benchmark scores a run: the mean over ``episodes`` seeded episodes of
 the cost ratio ``J_policy / J_paper`` on the task's own environment (lower is better), evaluated at
-``report_points`` points of training (:mod:`agents.curves`) so that ASHA stops the trials that lag
+``report_points`` points of training (:mod:`agents.training.curves`) so that ASHA stops the trials that lag
 behind at the same number of environment steps.
 
-Seeds (:mod:`agents.seeds`): the episodes are the **tuning** range (from 20 000); the evaluation
+Seeds (:mod:`agents.training.seeds`): the episodes are the **tuning** range (from 20 000); the evaluation
 range (10 000 - 19 999), on which the benchmark's tables are computed, is refused before Ray starts
 and asserted again in every trial. Every trial trains with the same training seed ``seed`` (common
 random numbers: trials differ by their hyperparameters only); ``seed`` also seeds Optuna's sampler
@@ -49,7 +49,7 @@ import numpy as np
 
 from .config.hyperparam_files import ALGOS
 from .config.envs import ENVS, gym_id
-from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from .training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "stored_spec", "check_constructor_keys",
            "write_best_recipe", "trials_table", "recipe_section", "STUDY_FILES", "METRIC"]
@@ -85,7 +85,7 @@ class SearchSpace:
 
     ``space(trial)`` samples the parameters (Ray's ``OptunaSearch(space=...)``);
     :meth:`overrides` turns the sampled values into hyperparameter overrides (merged over the recipe
-    by :func:`agents.recipes.resolve_recipe`); :meth:`baseline` is the recipe itself as a point of
+    by :func:`agents.training.recipes.resolve_recipe`); :meth:`baseline` is the recipe itself as a point of
     the space (None when one of its values lies outside).
 
     Sizes that cannot work with the budget are left out: PPO rollouts ``n_steps * n_envs`` of at most a
@@ -227,7 +227,7 @@ class StudySpec:
 
 
 def _assert_tuning_only(seeds) -> None:
-    """Tuning never sees an evaluation episode (agents/seeds.py): checked again inside every trial."""
+    """Tuning never sees an evaluation episode (agents/training/seeds.py): checked again inside every trial."""
     bad = [s for s in seeds if s in EVALUATION or s not in TUNING]
     if bad:
         raise AssertionError(f"tuning episodes {bad} lie outside the {TUNING} (the {EVALUATION} is the "
@@ -235,7 +235,7 @@ def _assert_tuning_only(seeds) -> None:
 
 
 def _recipe_hp(spec: StudySpec) -> dict:
-    from .recipes import resolve_recipe
+    from .training.recipes import resolve_recipe
 
     return resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None).hyperparams
 
@@ -245,8 +245,8 @@ def check_constructor_keys(spec: StudySpec) -> None:
     class does not take, before any trial starts (every trial would fail the same way)."""
     import inspect
 
-    from .algos import backend
-    from .recipes import resolve_recipe
+    from .training.algos import backend
+    from .training.recipes import resolve_recipe
 
     recipe = resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None)
     cls = backend(spec.algo).load_class()
@@ -284,13 +284,13 @@ def _finite(x: float) -> float:
 
 def _trial(config: dict, spec: StudySpec) -> None:
     """The Ray Tune trainable: train one run with the trial's values, report the score at the
-    learning-curve points (:func:`agents.curves.make_curve_callback` on the tuning episodes)."""
+    learning-curve points (:func:`agents.training.curves.make_curve_callback` on the tuning episodes)."""
     from ray import tune
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from .curves import make_curve_callback
-    from .recipes import merge_overrides
-    from .train import train
+    from .training.curves import make_curve_callback
+    from .training.recipes import merge_overrides
+    from .training.train import train
 
     seeds = spec.episode_seeds
     _assert_tuning_only(seeds)

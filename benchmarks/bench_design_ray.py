@@ -88,7 +88,7 @@ def throughput_row(agent: str) -> str:
     PPO's, or SBX with the recipe's environment copies and gradient steps per collect."""
     if agent == "ppo":
         return "ppo SB3 (recipe)"
-    from agents.recipes import resolve_recipe
+    from agents.training.recipes import resolve_recipe
 
     r = resolve_recipe(agent, "tracking")
     g = r.algo_kwargs.get("gradient_steps", 1)

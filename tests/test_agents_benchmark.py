@@ -156,7 +156,7 @@ def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
     import shutil
 
     from agents.benchmark import _finished_run
-    from agents.recipes import resolve_recipe
+    from agents.training.recipes import resolve_recipe
 
     out, _, _ = tiny_run
     run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")
@@ -180,7 +180,7 @@ def test_finished_runs_are_reused_only_with_the_same_library(tiny_run, tmp_path)
     import shutil
 
     from agents.benchmark import _finished_run
-    from agents.recipes import resolve_recipe
+    from agents.training.recipes import resolve_recipe
 
     out, _, _ = tiny_run
     run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")

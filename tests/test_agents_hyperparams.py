@@ -14,8 +14,8 @@ import pytest
 from agents.config.hyperparam_files import (ALGOS, HYPERPARAMS_DIR, HyperparamsError, load_hyperparams,
                                             parse_kwargs_string, read_hyperparams_file)
 from agents.config.envs import ENVS
-from agents.algos import torch_policy_kwargs
-from agents.recipes import resolve_recipe
+from agents.training.algos import torch_policy_kwargs
+from agents.training.recipes import resolve_recipe
 
 FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes.json")
 

@@ -18,8 +18,8 @@ pytest.importorskip("optuna")
 
 from agents.config.envs import gym_id  # noqa: E402
 from agents.config.hyperparam_files import read_hyperparams_file  # noqa: E402
-from agents.recipes import resolve_recipe  # noqa: E402
-from agents.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
+from agents.training.recipes import resolve_recipe  # noqa: E402
+from agents.training.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
 from agents.tune import SearchSpace, StudySpec, run_study  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 

@@ -24,7 +24,7 @@ only keys rl-zoo3 understands:
   (the agent acts in ``[-1, 1]``, mapped onto the env's bounds; the only wrapper accepted)
 - ``policy_kwargs``: rl-zoo3's string ``"dict(net_arch=[64, 64], activation_fn=nn.Tanh)"``
 - ``noise_type`` (``normal``, ``ornstein-uhlenbeck``) and ``noise_std``: off-policy action noise
-  (:func:`agents.algos.make_action_noise`; ``pink`` too outside the sections rl-zoo3 reads)
+  (:func:`agents.training.algos.make_action_noise`; ``pink`` too outside the sections rl-zoo3 reads)
 - ``lin_<x>`` schedules for ``learning_rate`` / ``clip_range``; the algorithm's constructor arguments
 
 Sections read by ``agents/`` only: ``<env>`` (settings rl-zoo3 cannot read, such as
@@ -72,7 +72,7 @@ MULTI_AGENT_ALGOS = ("ppo", "sac")
 OFF_POLICY_ALGOS = ("sac", "td3", "crossq")
 
 
-#: hybrid variants with their own sections (``default-<variant>``; :mod:`agents.hybrid`)
+#: hybrid variants with their own sections (``default-<variant>``; :mod:`agents.training.hybrid`)
 VARIANTS = ("residual", "bc")
 
 #: activation names accepted in ``policy_kwargs`` -> ``torch.nn`` class name
@@ -89,7 +89,7 @@ _UNSUPPORTED_KEYS = ("frame_stack", "vec_env_wrapper", "callback", "monitor_kwar
 #: the one wrapper accepted in ``env_wrapper``: the agent acts in [-1, 1]
 RESCALE_WRAPPER = "gymnasium.wrappers.RescaleAction"
 _RESCALE_ARGS = {"min_action": -1, "max_action": 1}
-#: exploration noise types (``noise_type``; :func:`agents.algos.make_action_noise`)
+#: exploration noise types (``noise_type``; :func:`agents.training.algos.make_action_noise`)
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck", "pink")
 #: the noise types rl-zoo3 understands (the only ones accepted in the sections it reads)
 ZOO_NOISE_TYPES = ("normal", "ornstein-uhlenbeck")

@@ -37,7 +37,7 @@ over the Gymnasium env):
 - The core's options ``normalized_actions`` / ``padded_observations`` apply: the slots' spaces are
   built from the env's own (``dobs_envs.envs.adapter.agent_spaces``, ``central_spaces``), and actions
   in the env's units are mapped to inputs by ``core.action_scale``.
-- Wrap it in ``VecMonitor`` for episode returns/lengths in the infos (``agents.train.build_vec_env`` does).
+- Wrap it in ``VecMonitor`` for episode returns/lengths in the infos (``agents.training.train.build_vec_env`` does).
 """
 from __future__ import annotations
 

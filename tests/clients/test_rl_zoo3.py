@@ -18,7 +18,7 @@ import pytest
 
 from agents.config.hyperparam_files import ALGOS, HYPERPARAMS_DIR, read_hyperparams_file
 from agents.config.envs import ENVS
-from agents.recipes import resolve_recipe
+from agents.training.recipes import resolve_recipe
 
 if importlib.util.find_spec("rl_zoo3") is None:  # as conftest.require, without importing it here
     if os.environ.get("CI"):

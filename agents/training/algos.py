@@ -1,9 +1,9 @@
 """The algorithm backends: which library and class implement each algorithm name.
 
 This module is the one place that knows which library trains ``"ppo"``, ``"sac"``, ``"td3"`` and
-``"crossq"``: the class lookup, the constructor arguments made from a :class:`agents.recipes.Recipe`
+``"crossq"``: the class lookup, the constructor arguments made from a :class:`agents.training.recipes.Recipe`
 (action noise included), the logger a model gets, how a model is saved and loaded, and the library
-name and version that :func:`agents.train.train` records in a run's ``config.json`` (``library``,
+name and version that :func:`agents.training.train.train` records in a run's ``config.json`` (``library``,
 ``library_version``).
 
 Implementations (:data:`BACKENDS`, in order of preference; chosen by measurement,
@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .config.hyperparam_files import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
+from ..config.hyperparam_files import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
 
 if TYPE_CHECKING:
     from .recipes import Recipe
@@ -265,7 +265,7 @@ class AlgoBackend:
 
     def rebuilt_objects(self, recipe: Recipe, venv=None) -> dict:
         """The attributes of a saved model that JSON cannot hold, rebuilt from ``recipe`` (its run's
-        ``config.json``) instead of unpickled from ``model.zip`` (:func:`agents.run_pickles.model_custom_objects`):
+        ``config.json``) instead of unpickled from ``model.zip`` (:func:`agents.training.run_pickles.model_custom_objects`):
         the policy class of ``recipe.policy``, ``policy_kwargs``, the schedules, the recipe's buffer classes and
         action noise (on ``venv``; None without one: evaluation draws no noise). ``lr_schedule`` is None: SB3
         derives it from ``learning_rate`` when the model is set up."""
@@ -284,7 +284,7 @@ class AlgoBackend:
 
     def load_run_model(self, path: str, recipe: Recipe, *, venv=None, device: str = "cpu", **kwargs):
         """The model saved in ``path`` by a run of ``recipe``, nothing unpickled but plain data
-        (:func:`agents.run_pickles.model_custom_objects`; raises :class:`agents.run_pickles.PickleRefused` for a
+        (:func:`agents.training.run_pickles.model_custom_objects`; raises :class:`agents.training.run_pickles.PickleRefused` for a
         payload it does not rebuild); ``venv``, ``kwargs`` as for :meth:`load`."""
         from .run_pickles import graft_sbx, model_custom_objects, sbx_payloads
 

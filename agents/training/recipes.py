@@ -8,7 +8,7 @@ normalisation, hybrids, action noise).
 
 A recipe is plain data in the files' vocabulary (``lin_`` schedules as strings, activation
 functions as names): turning it into the arguments of the library that implements the algorithm
-is :meth:`agents.algos.AlgoBackend.constructor_kwargs`.
+is :meth:`agents.training.algos.AlgoBackend.constructor_kwargs`.
 """
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from .config.hyperparam_files import OFF_POLICY_ALGOS, HyperparamsError, load_hyperparams, read_hyperparams_file
-from .config.envs import env_key, gym_id
+from ..config.hyperparam_files import OFF_POLICY_ALGOS, HyperparamsError, load_hyperparams, read_hyperparams_file
+from ..config.envs import env_key, gym_id
 
 __all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "recipe_file_section", "merge_overrides", "EXTRA_KEYS"]
 
@@ -29,14 +29,14 @@ EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_k
 
 @dataclass(frozen=True)
 class Recipe:
-    """What :func:`agents.train.train` derives from the hyperparameter files (and overrides) for one run.
+    """What :func:`agents.training.train.train` derives from the hyperparameter files (and overrides) for one run.
 
     ``algo_kwargs``: the algorithm's constructor arguments as written (``lin_`` schedules
     as strings, ``policy_kwargs.activation_fn`` a name); ``normalize``: ``False`` or the
     ``VecNormalize`` arguments (``gamma`` included); ``train_env_kwargs``: the recipe's
     training-only env options; ``bc``: the warm start's ``{episodes, noise, epochs, lr}``
     (``bc`` variant); ``action_noise_sigma`` and ``action_noise_type``: the off-policy algorithms'
-    action noise (``noise_std``, ``noise_type``; :func:`agents.algos.make_action_noise`), None without.
+    action noise (``noise_std``, ``noise_type``; :func:`agents.training.algos.make_action_noise`), None without.
     """
 
     policy: str
