@@ -11,8 +11,8 @@ from collections import Counter
 
 from dobs_envs.paths import OutputPathError, check_output_dir, check_output_file
 
-from .bench_exec import BACKENDS
-from .bench_plan import AGENTS, BUDGETS
+from .benchmark.backends import BACKENDS
+from .benchmark.plan import AGENTS, BUDGETS
 from .training.seeds import EVALUATION, TRAINING, TUNING, check_training_seeds
 from .config.hyperparam_files import ALGOS
 from .config.envs import ENVS, FAULT_FREE, TASKS
@@ -110,7 +110,7 @@ def add_parser(sub) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="retrain runs whose directory holds a finished run of another configuration or recipe "
                         "(removes those runs), and write into an --out that holds files the benchmark did not write "
-                        "(agents.benchmark.foreign_entries); without it the benchmark refuses both")
+                        "(agents.benchmark.store.foreign_entries); without it the benchmark refuses both")
     p.add_argument("--dry-run", action="store_true",
                    help="list the runs that would train, the kept models that would be evaluated again and the "
                         "stored results that are reused; train nothing")
@@ -385,10 +385,12 @@ def _evaluate(args) -> int:
 
 
 def _benchmark(args) -> int:
-    from .bench_exec import RAY_EXTRA
-    from .benchmark import OutDirError, RunConflictError, foreign_entries, plan_runs, run_benchmark
+    from .benchmark.backends import RAY_EXTRA
+    from .benchmark.driver import run_benchmark
+    from .benchmark.plan import RunConflictError, plan_runs
+    from .benchmark.store import OutDirError, foreign_entries
 
-    from .bench_plan import RECIPE_SUFFIX
+    from .benchmark.plan import RECIPE_SUFFIX
     from .config.hyperparam_files import HyperparamsError
 
     t0 = time.perf_counter()
@@ -443,7 +445,7 @@ def _benchmark(args) -> int:
     if foreign and not args.overwrite:
         _usage_error(f"--out {OutDirError(args.out, foreign)}")
     if args.address is not None and not args.dry_run:
-        from .bench_exec import check_address
+        from .benchmark.backends import check_address
 
         try:
             check_address(args.address)
@@ -498,7 +500,7 @@ def _benchmark(args) -> int:
 
 def _benchmark_dry_run(args, plan) -> int:
     """``benchmark --dry-run``: which runs would train, which stored results are reused (nothing written)."""
-    from .benchmark import pending_runs, reevaluated_runs, replaced_runs
+    from .benchmark.plan import pending_runs, reevaluated_runs, replaced_runs
 
     todo, again = pending_runs(plan), reevaluated_runs(plan)
     clash = {sp["path"] for sp in replaced_runs(todo)}

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from agents.training.algos import BACKENDS, backend, backend_of, make_action_noise
-from agents.benchmark import BUDGETS
+from agents.benchmark.plan import BUDGETS
 from agents.training.loading import load_agent
 from agents.training.recipes import resolve_recipe
 from agents.training.train import train

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from agents.benchmark import BUDGETS
+from agents.benchmark.plan import BUDGETS
 from agents.training.recipes import resolve_recipe
 from agents.training.runs import RunDirError, read_run_config, resume_point
 from proc_tree import alive as _alive, children as _children

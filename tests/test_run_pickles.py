@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import dobs_envs
-from agents.benchmark import BUDGETS
+from agents.benchmark.plan import BUDGETS
 from agents.training.run_pickles import PickleRefused, load_replay_buffer, load_vecnormalize
 from dobs_envs.cli import main
 

@@ -2,9 +2,9 @@
 (:func:`plan_runs`) and what a stored run in ``<out>/models`` already answers
 (:func:`stored_answer`, :func:`pending_runs`, :func:`reevaluated_runs`, :func:`replaced_runs`).
 
-Nothing here trains or writes: the execution backends (:mod:`agents.bench_exec`) run the
-work units of :mod:`agents.bench_tasks`, the driver (:func:`agents.benchmark.run_benchmark`)
-writes the records they return (:mod:`agents.bench_store`).
+Nothing here trains or writes: the execution backends (:mod:`agents.benchmark.backends`) run the
+work units of :mod:`agents.benchmark.tasks`, the driver (:func:`agents.benchmark.driver.run_benchmark`)
+writes the records they return (:mod:`agents.benchmark.store`).
 """
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from .training.algos import LEGACY_LIBRARY, backend
-from .config.envs import ENVS, TASKS
-from .training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from ..training.algos import LEGACY_LIBRARY, backend
+from ..config.envs import ENVS, TASKS
+from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
            "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
@@ -168,7 +168,7 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
 def _training_overrides(spec: dict) -> dict:
     """The budget's hyperparameter overrides of a run plus its agent's training-only env options; a
     recipe-file agent's: its file's section with the budget's overrides over it (as over the shipped recipe)."""
-    from .training.recipes import merge_overrides
+    from ..training.recipes import merge_overrides
 
     a = agent_spec(spec["agent"])
     hp = merge_overrides(spec.get("recipe"), spec["hp"])
@@ -180,7 +180,7 @@ def _training_overrides(spec: dict) -> dict:
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
     (``training_only``: see :func:`_finished_run`)."""
-    from .training.recipes import resolve_recipe
+    from ..training.recipes import resolve_recipe
 
     a = agent_spec(spec["agent"])
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
@@ -336,7 +336,7 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
     curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
-    from .training.recipes import merge_overrides, recipe_file_section
+    from ..training.recipes import merge_overrides, recipe_file_section
 
     # the files' sections, read and validated once per env (nothing named in a file is imported)
     sections = {(k, e): recipe_file_section(f, e) for k, f in recipes.items() for e in env_names}
@@ -369,8 +369,8 @@ def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) ->
     algorithm class does not take, before anything trains (every run would fail the same way)."""
     import inspect
 
-    from .config.hyperparam_files import HyperparamsError
-    from .training.recipes import resolve_recipe
+    from ..config.hyperparam_files import HyperparamsError
+    from ..training.recipes import resolve_recipe
 
     a = AGENTS[agent]
     recipe = resolve_recipe(a.algo, env, multi_agent=a.multi_agent, hybrid=a.hybrid, overrides=overrides)
