@@ -20,7 +20,7 @@ from agents.config.envs import gym_id  # noqa: E402
 from agents.config.hyperparam_files import read_hyperparams_file  # noqa: E402
 from agents.training.recipes import resolve_recipe  # noqa: E402
 from agents.training.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
-from agents.tune import SearchSpace, StudySpec, run_study  # noqa: E402
+from agents.tune.study import SearchSpace, StudySpec, run_study  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 
 # tiny: 2 env copies, 512 env steps per trial (rollouts of 64 x 2), 2 tuning episodes of 20 control periods

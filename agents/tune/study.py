@@ -47,9 +47,9 @@ from typing import Any
 
 import numpy as np
 
-from .config.hyperparam_files import ALGOS
-from .config.envs import ENVS, gym_id
-from .training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from ..config.hyperparam_files import ALGOS
+from ..config.envs import ENVS, gym_id
+from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["SearchSpace", "StudySpec", "StudyResult", "StudyDirError", "run_study", "stored_spec", "check_constructor_keys",
            "write_best_recipe", "trials_table", "recipe_section", "STUDY_FILES", "METRIC"]
@@ -235,7 +235,7 @@ def _assert_tuning_only(seeds) -> None:
 
 
 def _recipe_hp(spec: StudySpec) -> dict:
-    from .training.recipes import resolve_recipe
+    from ..training.recipes import resolve_recipe
 
     return resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None).hyperparams
 
@@ -245,8 +245,8 @@ def check_constructor_keys(spec: StudySpec) -> None:
     class does not take, before any trial starts (every trial would fail the same way)."""
     import inspect
 
-    from .training.algos import backend
-    from .training.recipes import resolve_recipe
+    from ..training.algos import backend
+    from ..training.recipes import resolve_recipe
 
     recipe = resolve_recipe(spec.algo, spec.env, overrides=spec.hyperparams or None)
     cls = backend(spec.algo).load_class()
@@ -288,9 +288,9 @@ def _trial(config: dict, spec: StudySpec) -> None:
     from ray import tune
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from .training.curves import make_curve_callback
-    from .training.recipes import merge_overrides
-    from .training.train import train
+    from ..training.curves import make_curve_callback
+    from ..training.recipes import merge_overrides
+    from ..training.train import train
 
     seeds = spec.episode_seeds
     _assert_tuning_only(seeds)
@@ -603,7 +603,7 @@ def recipe_section(hp: dict) -> dict:
     """Merged hyperparameters (agents' vocabulary, a run's ``config.json`` ``hyperparams``) as an
     rl-zoo3 section: ``policy_kwargs`` as its ``"dict(...)"`` string with ``nn.<Activation>``,
     ``normalize_actions`` as the ``RescaleAction`` ``env_wrapper``."""
-    from .config.hyperparam_files import ACTIVATIONS, RESCALE_WRAPPER
+    from ..config.hyperparam_files import ACTIVATIONS, RESCALE_WRAPPER
 
     sec = {}
     for k, v in hp.items():
