@@ -532,7 +532,8 @@ def _tune(args) -> int:
         from ray import tune as _  # noqa: F401
     except ImportError as exc:
         _usage_error(f"tune needs Ray Tune and Optuna ({exc.name} is missing): pip install 'dobs-envs[distributed]'")
-    from .tune.study import StudyDirError, StudySpec, check_constructor_keys, run_study, stored_spec
+    from .tune.spec import StudyDirError, StudySpec, stored_spec
+    from .tune.study import check_constructor_keys, run_study
 
     if args.resume and args.overwrite:
         _usage_error("--resume continues a study, --overwrite replaces it: give one of them")
