@@ -153,7 +153,8 @@ def test_overrides_accept_both_vocabularies():
 
 def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
     """rl-zoo3 evaluates with the recipe's training-only env_kwargs (its eval env and rl_zoo3.enjoy);
-    the docs (integrations page) and agents/config/hyperparam_files.py tell how to give it the task's own state_bound."""
+    the docs (integrations page) and agents/config/hyperparam_files.py tell how to give it the task's own
+    state_bound."""
     import os
     import re
 

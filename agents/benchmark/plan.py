@@ -12,8 +12,8 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from ..training.algos import LEGACY_LIBRARY, backend
 from ..config.envs import ENVS, TASKS
+from ..training.algos import LEGACY_LIBRARY, backend
 from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
@@ -120,7 +120,8 @@ ANALYTIC_INFO = {"paper (separation)": "own observer's estimate",
                  "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
 ANALYTIC = tuple(ANALYTIC_INFO)
 PAPER = ANALYTIC[0]
-CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/training/seeds.py)
+#: learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/training/seeds.py)
+CURVE_SEED = TUNING.start
 
 
 # ---------------------------------------------------------------------- what a stored run answers
@@ -314,8 +315,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
     ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
-    :class:`agents.config.hyperparam_files.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has no
-    section for an env."""
+    :class:`agents.config.hyperparam_files.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has
+    no section for an env."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
     env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.envs.TASKS)
@@ -365,8 +366,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
 
 
 def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:
-    """:class:`agents.config.hyperparam_files.HyperparamsError` naming the keys of the recipe file ``path`` that ``agent``'s
-    algorithm class does not take, before anything trains (every run would fail the same way)."""
+    """:class:`agents.config.hyperparam_files.HyperparamsError` naming the keys of the recipe file ``path`` that
+    ``agent``'s algorithm class does not take, before anything trains (every run would fail the same way)."""
     import inspect
 
     from ..config.hyperparam_files import HyperparamsError

@@ -12,11 +12,11 @@ import os
 
 import numpy as np
 
-from .plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
-from .tasks import mean_trajectory
 from ..config.envs import FAULT_FREE
 from ..evaluate import STEADY_S, TRANSIENT_S
+from .plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
 from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
+from .tasks import mean_trajectory
 
 __all__ = ["write_env_report", "write_summary", "format_table", "format_markdown", "aggregate_over_envs",
            "summarise_dicts", "TABLE_COLUMNS", "DEGRADATION_COLUMNS", "STATISTICS_DOC", "DEGRADATION_DOC",

@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 import os
 
-from .plan import BUDGETS, is_agent_name
 from ..config.envs import ENVS
 from ..training.runs import clear_run
+from .plan import BUDGETS, is_agent_name
 
 __all__ = ["MARKER", "OutDirError", "foreign_entries", "claim_out_dir", "RECORD_FILES", "write_record",
            "read_run_files"]

@@ -20,10 +20,10 @@ import time
 
 import numpy as np
 
-from .plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
-from .store import RECORD_FILES, read_run_files
 from ..config.envs import FAULT_FREE, gym_factory, parallel_factory
 from ..evaluate import evaluate_policy
+from .plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
+from .store import RECORD_FILES, read_run_files
 
 __all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
            "mean_trajectory", "executed_on"]

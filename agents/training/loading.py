@@ -15,10 +15,10 @@ from typing import Callable
 
 import numpy as np
 
+from ..vecenv.slots import SlotEncoder
 from .algos import BackendUnavailable, backend_of
 from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
-from ..vecenv.slots import SlotEncoder
 
 __all__ = ["TrainedAgent", "load_agent", "evaluate_model"]
 

@@ -1,10 +1,10 @@
 """Recipes: what a training run is made of, resolved from the hyperparameter files.
 
-:func:`resolve_recipe` reads ``agents/config/hyperparams/<algo>.yaml`` (:func:`agents.config.hyperparam_files.load_hyperparams`,
-overrides merged) and :func:`recipe_from_hyperparams` splits the merged hyperparameters of a run (the
-files', or a run's ``config.json`` ``hyperparams`` on resume) into a :class:`Recipe`: the algorithm's
-constructor arguments as written and the keys only ``agents/`` acts on (environment copies, budget,
-normalisation, hybrids, action noise).
+:func:`resolve_recipe` reads ``agents/config/hyperparams/<algo>.yaml``
+(:func:`agents.config.hyperparam_files.load_hyperparams`, overrides merged) and :func:`recipe_from_hyperparams` splits
+the merged hyperparameters of a run (the files', or a run's ``config.json`` ``hyperparams`` on resume) into a
+:class:`Recipe`: the algorithm's constructor arguments as written and the keys only ``agents/`` acts on (environment
+copies, budget, normalisation, hybrids, action noise).
 
 A recipe is plain data in the files' vocabulary (``lin_`` schedules as strings, activation
 functions as names): turning it into the arguments of the library that implements the algorithm
@@ -17,8 +17,8 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from ..config.hyperparam_files import OFF_POLICY_ALGOS, HyperparamsError, load_hyperparams, read_hyperparams_file
 from ..config.envs import env_key, gym_id
+from ..config.hyperparam_files import OFF_POLICY_ALGOS, HyperparamsError, load_hyperparams, read_hyperparams_file
 
 __all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "recipe_file_section", "merge_overrides", "EXTRA_KEYS"]
 
@@ -101,9 +101,10 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
 def recipe_file_section(path: str, env_name: str) -> dict:
     """The section of the recipe file ``path`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``)
     that rl-zoo3 would read for ``env_name``: its Gymnasium id's section, else ``default``; in
-    :mod:`agents.config.hyperparam_files`'s vocabulary, validated by :func:`agents.config.hyperparam_files.read_hyperparams_file` (nothing
-    named in it is imported). Used as hyperparameter overrides: a complete section replaces the env's
-    recipe key by key. :class:`agents.config.hyperparam_files.HyperparamsError` names the file when no section applies."""
+    :mod:`agents.config.hyperparam_files`'s vocabulary, validated by
+    :func:`agents.config.hyperparam_files.read_hyperparams_file` (nothing named in it is imported). Used as
+    hyperparameter overrides: a complete section replaces the env's recipe key by key.
+    :class:`agents.config.hyperparam_files.HyperparamsError` names the file when no section applies."""
     if not os.path.isfile(path):
         raise HyperparamsError(f"recipe file {path!r} does not exist")
     table = read_hyperparams_file(path)

@@ -327,11 +327,11 @@ def resume(path: str, *, progress: bool = True, threads: int | None = 1, verbose
     """Continue the interrupted run in ``path`` from :func:`resume_point` up to its budget, with the
     run's own configuration (``config.json``: env, algorithm, hyperparameters, seed, budget).
 
-    The model, the normaliser statistics and (off-policy, after a SIGINT) the replay buffer are
-    restored and SB3 keeps counting timesteps (schedules continue); the environments restart
-    with fresh episodes (seed ``agents.training.seeds.resume_seed(seed, timesteps done)``), so the result is not bit-identical to an
-    uninterrupted run. An off-policy run resumed from a checkpoint starts with an empty replay
-    buffer. Interrupting again works as in :func:`train`.
+    The model, the normaliser statistics and (off-policy, after a SIGINT) the replay buffer are restored and SB3 keeps
+    counting timesteps (schedules continue); the environments restart with fresh episodes (seed
+    ``agents.training.seeds.resume_seed(seed, timesteps done)``), so the result is not bit-identical to an uninterrupted
+    run. An off-policy run resumed from a checkpoint starts with an empty replay buffer. Interrupting again works as in
+    :func:`train`.
     """
     from ..config.envs import check_env_name
     from .run_pickles import load_replay_buffer, load_vecnormalize

@@ -145,7 +145,8 @@ def write_best_recipe(path: str, spec: StudySpec, best: dict, rows: list[dict], 
            if baseline and rows and rows[0][METRIC] is not None else "the recipe before tuning lies outside the "
                                                                       "search space (not a trial)"),
         f"# use: dobs-envs train --env {spec.env} --algo {spec.algo} --recipe {os.path.basename(path)}; or replace "
-        f"the {gym_id(spec.env)} section of agents/config/hyperparams/{spec.algo}.yaml with it (the benchmark's recipe)",
+        f"the {gym_id(spec.env)} section of agents/config/hyperparams/{spec.algo}.yaml with it "
+        f"(the benchmark's recipe)",
     ]
     text = yaml.safe_dump({gym_id(spec.env): section}, sort_keys=False, default_flow_style=None)
     with open(path + ".tmp", "w") as fh:
