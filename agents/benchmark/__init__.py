@@ -11,7 +11,7 @@ The public names of the module ``agents.benchmark`` before issue 38 (``from agen
 run_benchmark``, ``agents.benchmark.foreign_entries``, ...) are still found here; they are imported on first use,
 so that importing a part of the package does not import the driver.
 """
-import importlib
+from .._moved import moved_names
 
 #: name -> the module that defines it (the public names of the former module agents/benchmark.py)
 _MOVED = {
@@ -23,12 +23,4 @@ _MOVED = {
     **dict.fromkeys(("OutDirError", "MARKER", "foreign_entries", "claim_out_dir"), "store"),
 }
 
-
-def __getattr__(name):
-    if name in _MOVED:
-        return getattr(importlib.import_module(f"{__name__}.{_MOVED[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*globals(), *_MOVED])
+__getattr__, __dir__ = moved_names(__name__, _MOVED)

@@ -9,7 +9,7 @@ The names of the module ``agents.tune`` before issue 38 are still found here, im
 path of scripts, and the references Ray Tune pickled into an interrupted study's experiment (its search space and
 trial-directory function), so that ``--resume`` continues a study started before the split.
 """
-import importlib
+from .._moved import moved_names
 
 #: name -> the module that defines it (the names of the former module agents/tune.py)
 _MOVED = {
@@ -19,12 +19,4 @@ _MOVED = {
     **dict.fromkeys(("write_best_recipe", "trials_table", "recipe_section"), "outputs"),
 }
 
-
-def __getattr__(name):
-    if name in _MOVED:
-        return getattr(importlib.import_module(f"{__name__}.{_MOVED[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*globals(), *_MOVED])
+__getattr__, __dir__ = moved_names(__name__, _MOVED)
