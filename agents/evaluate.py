@@ -157,7 +157,7 @@ def evaluate_policy(env, policy: Callable, episodes: int, seed: int, *, parallel
     episodes : int
         Number of episodes.
     seed : int
-        Seed of the first episode. Use the tuning range (20000-29999, :mod:`agents.seeds`) while you
+        Seed of the first episode. Use the tuning range (20000-29999, :mod:`agents.training.seeds`) while you
         develop a policy; the benchmark's evaluation range 10000-19999 is for final tables.
     parallel : bool
         ``True`` for the PettingZoo dict API, ``False`` for the Gymnasium API.
@@ -196,53 +196,3 @@ def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
     pe = [r.rms_policy_estimation_error for r in results if r.rms_policy_estimation_error is not None]
     out["rms_policy_estimation_error_mean"] = float(np.mean(pe)) if pe else None
     return out
-
-
-def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True,
-                   allow_custom_env: bool = False) -> dict:
-    """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment.
-
-    ``path`` is a run directory, its ``model.zip`` or one of its checkpoints
-    (``<run>/checkpoints/<algo>_<steps>_steps.zip``, evaluated with the normaliser saved with it);
-    the summary names the model file (``model``).
-
-    The environment named in the run's ``config.json`` must be a registered one
-    (:func:`agents.config.check_env_name`); a ``module:attr`` name is refused unless
-    ``allow_custom_env`` (a file must never make us import code). ``model.zip`` and
-    ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`; a refused
-    class raises :class:`agents.run_pickles.PickleRefused`).
-    """
-    from .config import check_env_name, gym_factory, parallel_factory
-    from .loading import load_agent
-    from .runs import read_run_config
-
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    cfg = read_run_config(path)
-    check_env_name(cfg.get("env"), multi_agent=bool(cfg.get("multi_agent")), allow_custom=allow_custom_env,
-                   what="the run's environment (config.json 'env')")
-    agent = load_agent(path)
-    cfg = agent.config
-    # the task's own env (a recipe's training-only options, cfg["train_env_kwargs"], do not apply)
-    env = (parallel_factory if agent.multi_agent else gym_factory)(cfg["env"], cfg.get("env_kwargs"))()
-    pol = agent.policy_for(env)
-    try:
-        _base(env)
-    except TypeError:
-        # not a dobs_envs environment (e.g. Pendulum-v1): returns only
-        rets = []
-        for k in range(episodes):
-            obs, _ = env.reset(seed=seed + k)
-            R, done = 0.0, False
-            while not done:
-                obs, r, term, trunc, _ = env.step(pol(obs))
-                R += float(r)
-                done = term or trunc
-            rets.append(R)
-        env.close()
-        return {"policy": agent.name, "model": agent.model_path, "episodes": episodes,
-                "seeds": list(range(seed, seed + episodes)),
-                "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets))}
-    res = evaluate_policy(env, pol, episodes, seed, parallel=agent.multi_agent, progress=progress, desc=agent.name)
-    env.close()
-    return {"policy": agent.name, "model": agent.model_path, **summarise(res)}

@@ -32,7 +32,7 @@ Usage::
 
 ``--part benchmark``
     ``dobs-envs benchmark --env all --budget full`` projected from stored run records: the run list is
-    :func:`agents.bench_plan.plan_runs` (its order is the submission order); each run's training time
+    :func:`agents.benchmark.plan.plan_runs` (its order is the submission order); each run's training time
     is, in this order of preference, (a) its own full-budget record (``train_seconds``) at the
     budget's steps, (b) the mean seconds per env step of the same (env, agent)'s records (other
     seeds, or another step count), times the budget's steps, (c) the same from a proxy agent of the same env
@@ -88,7 +88,7 @@ def throughput_row(agent: str) -> str:
     PPO's, or SBX with the recipe's environment copies and gradient steps per collect."""
     if agent == "ppo":
         return "ppo SB3 (recipe)"
-    from agents.recipes import resolve_recipe
+    from agents.training.recipes import resolve_recipe
 
     r = resolve_recipe(agent, "tracking")
     g = r.algo_kwargs.get("gradient_steps", 1)
@@ -321,7 +321,7 @@ def _per_step(recs: dict, env: str, agent: str):
 
 
 def run_benchmark_projection(results_dir: str) -> dict:
-    from agents.bench_plan import BUDGETS, plan_runs
+    from agents.benchmark.plan import BUDGETS, plan_runs
 
     print(f"\n== full four-environment benchmark, projected from the records in {results_dir}; load {_load()}",
           flush=True)

@@ -3,8 +3,8 @@
 Both are trained in one process with identical settings: 16 environment copies, the same
 PPO hyperparameters (n_steps, batch size, epochs, network, torch threads), no
 normalisation, ``VecMonitor``/``Monitor`` episode statistics. Tracking runs on
-:class:`agents.core_vec_env.CoreVecEnv` (all 16 copies advanced by one compiled call,
-built by ``agents.training_envs.build_vec_env``); Pendulum on SB3's ``DummyVecEnv`` of 16
+:class:`agents.vecenv.batched_core.CoreVecEnv` (all 16 copies advanced by one compiled call,
+built by ``agents.training.env_factory.build_vec_env``); Pendulum on SB3's ``DummyVecEnv`` of 16
 Gymnasium envs (what ``make_vec_env`` gives every other Gymnasium id). The runs alternate
 (tracking, pendulum, tracking, ...) and the best of each is kept, so the ratio
 ``tracking / pendulum`` is measured side by side: >= 1.0 means the simulator costs no more
@@ -70,7 +70,7 @@ def null_venv(n_envs: int, like):
 def make_venv(env_id: str, n_envs: int, seed: int):
     from stable_baselines3.common.env_util import make_vec_env
 
-    from agents.training_envs import build_vec_env
+    from agents.training.env_factory import build_vec_env
 
     if env_id == NULL:
         return null_venv(n_envs, build_vec_env("dobs_envs/Tracking-v0", n_envs=1))

@@ -17,7 +17,7 @@ are measured the same way:
   epsilon and the oracle variant; ``step_env`` on a random design; the front ends over the core
   (observations, rewards, flags, every info value, actions mapped to inputs): the PettingZoo env
   (also with ``normalized_actions``/``padded_observations``), ``gym.make`` and ``gym.make_vec`` and
-  SB3 ``agents.core_vec_env.CoreVecEnv`` (centralised and shared slots, agent ids, rescaled actions,
+  SB3 ``agents.vecenv.batched_core.CoreVecEnv`` (centralised and shared slots, agent ids, rescaled actions,
   diagnostics; skipped when the checkout has no ``agents``); communication faults (each kind alone and
   all at once on the tracking core, tiles, remainder tiles, copy by copy, two threads; every env with all
   of them; large states with them; ``tracking_lossy``; faulted ``rollout`` of NE2), the fault state
@@ -241,7 +241,7 @@ def adapters():
             acc += [o, r, te, tr] + _flat_info(info)
         out[f"vector env {gid} {kw}"] = h(*acc)
     try:
-        from agents.core_vec_env import CoreVecEnv
+        from agents.core_vec_env import CoreVecEnv  # the path every checkout has (a re-export since issue 38)
     except ImportError:
         return out
     for cls, shared, agent_id, rescale, diag, kw in (

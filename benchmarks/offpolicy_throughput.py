@@ -1,7 +1,7 @@
 """Off-policy training throughput on a dobs_envs task, side by side with PPO (issue 21, item 1).
 
 Candidates (all in one process, on the same machine and run, each from the shipped recipe of its
-algorithm on the task, ``agents/hyperparams/<algo>.yaml``, with the overrides named in its label):
+algorithm on the task, ``agents/config/hyperparams/<algo>.yaml``, with the overrides named in its label):
 
 - ``ppo SB3``: the reference (its recipe: 8 copies on the batched core);
 - ``sac SB3 1 env``: SB3 SAC as shipped (1 copy, one gradient step per env step);
@@ -19,8 +19,8 @@ environment steps (all copies), the ratio is to PPO's.
 
 ``--curve STEPS``: also train every candidate for STEPS env steps from scratch (training seeds
 ``--seed``, ``--seed + 1``, ...) and score it at ``--points`` checkpoints on ``--episodes`` episodes of
-the tuning range (agents/seeds.py; never evaluation episodes): the cost ratio J / J_paper of the
-deterministic policy on the task's own env (:func:`agents.curves.make_curve_callback`, the
+the tuning range (agents/training/seeds.py; never evaluation episodes): the cost ratio J / J_paper of the
+deterministic policy on the task's own env (:func:`agents.training.curves.make_curve_callback`, the
 benchmark's learning-curve code), mean over the training runs. The learning curves compare the
 candidates at equal env steps.
 
@@ -47,7 +47,7 @@ class Candidate:
     overrides: dict = field(default_factory=dict)
 
     def backend(self):
-        from agents.algos import AlgoBackend, flax_policy_kwargs, torch_policy_kwargs
+        from agents.training.algos import AlgoBackend, flax_policy_kwargs, torch_policy_kwargs
 
         jax = self.library == "sbx-rl"
         module = {"sbx-rl": "sbx", "stable-baselines3": "stable_baselines3", "sb3-contrib": "sb3_contrib"}[self.library]
@@ -78,9 +78,9 @@ def candidates(n: int, g: int, train_freq: int = 1, extra: dict | None = None) -
 
 
 def build(c: Candidate, env: str, seed: int, timesteps: int):
-    """``(model, backend, venv, run config)`` of candidate ``c`` (the training env of ``agents.train``)."""
-    from agents.recipes import resolve_recipe
-    from agents.train import _setup
+    """``(model, backend, venv, run config)`` of candidate ``c`` (the training env of ``agents.training.train``)."""
+    from agents.training.recipes import resolve_recipe
+    from agents.training.train import _setup
 
     b = c.backend()
     recipe = resolve_recipe(c.recipe, env, overrides=c.overrides or None)
@@ -132,8 +132,8 @@ def throughput(cands: list[Candidate], env: str, steps: int, warmup: int, repeat
 
 def curves(cands: list[Candidate], env: str, steps: int, seeds: list[int], points: int, episodes: int) -> dict:
     """J / J_paper of each candidate at ``points`` checkpoints of a ``steps``-step run per training seed."""
-    from agents.curves import make_curve_callback
-    from agents.seeds import TUNING, check_episode_seeds
+    from agents.training.curves import make_curve_callback
+    from agents.training.seeds import TUNING, check_episode_seeds
 
     eval_seeds = check_episode_seeds(TUNING.start, episodes, TUNING)
     every = max(1, steps // points)
@@ -203,7 +203,7 @@ def main(argv=None) -> int:
                                                  "(the PPO reference is always kept)")
     ap.add_argument("--xla-threads", type=int, default=None,
                     help="threads of XLA's CPU client (PJRT_NPROC, set before JAX computes); default: as "
-                         "agents.train.set_threads does (1 with --threads 1; else XLA's own: all cores)")
+                         "agents.training.train.set_threads does (1 with --threads 1; else XLA's own: all cores)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (agents' default 1)")
     ap.add_argument("--curve", type=int, default=None, metavar="STEPS",
                     help="also train each candidate STEPS env steps and score it on tuning episodes")
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
     if args.json and os.path.exists(args.json):
         print(f"offpolicy_throughput: error: --json {args.json!r} exists", file=sys.stderr)
         return 2
-    from agents.train import set_threads
+    from agents.training.train import set_threads
 
     set_threads(args.threads)
     extra = None

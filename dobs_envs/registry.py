@@ -2,7 +2,7 @@
 
 Read by the Gymnasium registration (:mod:`dobs_envs`), the PettingZoo modules
 (``dobs_envs.tracking_v0`` ...), :mod:`dobs_envs.envs.centralized` and
-``agents.config.ENVS``. Importing it is cheap: plain data, no numpy and no
+``agents.config.envs.ENVS``. Importing it is cheap: plain data, no numpy and no
 observer designs. ``max_episode_steps`` is derived from the default scenario's
 horizon ``t_end`` and the default control period ``DEFAULT_DT * DEFAULT_SUBSTEPS``
 (tests check both against the environments' actual defaults).

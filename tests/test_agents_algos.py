@@ -1,4 +1,4 @@
-"""The algorithm backends (agents/algos.py, issue 21): SBX (Stable Baselines Jax, the ``jax`` extra) trains
+"""The algorithm backends (agents/training/algos.py, issue 21): SBX (Stable Baselines Jax, the ``jax`` extra) trains
 SAC, TD3 and CrossQ when it imports, else Stable-Baselines3 / sb3-contrib with one notice; a run is
 loaded by the library it records, and a run of a library that is not installed is refused in one line
 naming the extra. Exploration noise types (normal, Ornstein-Uhlenbeck, pink).
@@ -18,11 +18,11 @@ import textwrap
 import numpy as np
 import pytest
 
-from agents.algos import BACKENDS, backend, backend_of, make_action_noise
-from agents.benchmark import BUDGETS
-from agents.loading import load_agent
-from agents.recipes import resolve_recipe
-from agents.train import train
+from agents.training.algos import BACKENDS, backend, backend_of, make_action_noise
+from agents.benchmark.plan import BUDGETS
+from agents.training.loading import load_agent
+from agents.training.recipes import resolve_recipe
+from agents.training.train import train
 from dobs_envs.cli import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -52,8 +52,8 @@ def _python(code: str, *, block_sbx: bool, timeout: float = 600) -> subprocess.C
 FALLBACK_TRAINING = """
 import json, sys
 import numpy as np
-from agents.train import train
-from agents.loading import load_agent
+from agents.training.train import train
+from agents.training.loading import load_agent
 out = {}
 for algo, noise in (("sac", None), ("td3", "pink"), ("crossq", None)):
     hp = dict(learning_starts=50, batch_size=16, buffer_size=500, policy_kwargs=NETS[algo])
@@ -193,7 +193,7 @@ def _lag1(x: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def tracking_venv():
-    from agents.training_envs import build_vec_env
+    from agents.training.env_factory import build_vec_env
 
     venv = build_vec_env("tracking", n_envs=3, seed=0)
     yield venv
@@ -248,7 +248,7 @@ def test_one_thread_also_for_xla(user_flags, user_threads):
     aborts on flags it does not know, so the JAX computation afterwards checks the spelling."""
     code = textwrap.dedent("""
         import os
-        from agents.train import set_threads
+        from agents.training.train import set_threads
         set_threads(1)
         set_threads(1)  # idempotent
         import jax.numpy as jnp

@@ -23,7 +23,7 @@ import time
 import pytest
 
 import agents
-from agents.benchmark import run_benchmark
+from agents.benchmark.driver import run_benchmark
 from proc_tree import alive as _alive, descendants as _descendants
 from dobs_envs.cli import main
 
@@ -116,7 +116,7 @@ def test_ray_backend_gives_the_serial_numbers(serial_run, local_ray, tmp_path):
 def test_an_exception_in_a_callers_ray_session_cancels_its_running_tasks(local_ray):
     """In a Ray session the caller started (which stays up), leaving the backend on an exception ends
     the tasks still running: their CPUs are free again at once, not after the task's 10 minutes."""
-    from agents.bench_exec import Job, RayBackend
+    from agents.benchmark.backends import Job, RayBackend
 
     jobs = [Job(("slow",), time.sleep, (600,)), Job(("quick",), abs, (-1,))]
     with pytest.raises(RuntimeError, match="stop"):
@@ -280,7 +280,7 @@ def test_ctrl_c_shuts_the_local_ray_down_and_keeps_finished_runs(tmp_path):
         if proc.poll() is None or _group_alive(proc.pid):
             _stop_group(proc)
         shutil.rmtree(tmp, ignore_errors=True)
-    from agents.benchmark import pending_runs, plan_runs
+    from agents.benchmark.plan import pending_runs, plan_runs
 
     plan = plan_runs("tracking", "tiny", out, agents=["ppo", "ppo_ma"], seeds=2, timesteps=64, episodes=1)
     assert len(pending_runs(plan)) <= len(plan.specs) - len(kept)
@@ -312,7 +312,7 @@ def test_an_address_where_no_cluster_answers_is_a_usage_error(tmp_path, capsys):
 
 
 def test_backend_api_errors_are_named(tmp_path):
-    from agents.bench_exec import make_backend
+    from agents.benchmark.backends import make_backend
 
     with pytest.raises(ValueError, match="unknown backend 'dask'"):
         run_benchmark("tracking", "tiny", str(tmp_path / "a"), backend="dask")

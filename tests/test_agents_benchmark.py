@@ -8,7 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from agents.benchmark import AGENTS, ANALYTIC, BUDGETS, run_benchmark
+from agents.benchmark.driver import run_benchmark
+from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS
 from dobs_envs.cli import main
 
 TINY = BUDGETS["tiny"]
@@ -59,9 +60,9 @@ def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
 
 def test_rows_state_information_budget_and_run_level_statistics(tiny_run):
     """The training run is the statistical unit: each row's IQM, CI, mean and probability of
-    improvement are those of agents.stats applied to the per-run scores recomputed here from the
+    improvement are those of agents.benchmark.stats applied to the per-run scores recomputed here from the
     stored per-episode costs; every row says what it sees, learned rows their budget."""
-    from agents.stats import improvement_estimate, interval_estimate, mean_estimate, run_scores
+    from agents.benchmark.stats import improvement_estimate, interval_estimate, mean_estimate, run_scores
 
     _, _, doc = tiny_run
     paper = np.array(doc["paper_cost"])
@@ -92,7 +93,7 @@ def test_rows_state_information_budget_and_run_level_statistics(tiny_run):
     ({"seed": -1}, "training range"),
 ])
 def test_seed_ranges_are_disjoint(kwargs, match, tmp_path):
-    from agents.benchmark import plan_runs
+    from agents.benchmark.plan import plan_runs
 
     with pytest.raises(ValueError, match=match):
         plan_runs("tracking", "tiny", str(tmp_path), **kwargs)
@@ -155,8 +156,8 @@ def test_finished_runs_are_reused_only_with_the_same_recipe(tiny_run, tmp_path):
     editing a recipe file must retrain, never silently reuse the old recipe's result."""
     import shutil
 
-    from agents.benchmark import _finished_run
-    from agents.recipes import resolve_recipe
+    from agents.benchmark.plan import _finished_run
+    from agents.training.recipes import resolve_recipe
 
     out, _, _ = tiny_run
     run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")
@@ -179,8 +180,8 @@ def test_finished_runs_are_reused_only_with_the_same_library(tiny_run, tmp_path)
     (SBX) must never pass an SB3 result off as SBX's, or the reverse."""
     import shutil
 
-    from agents.benchmark import _finished_run
-    from agents.recipes import resolve_recipe
+    from agents.benchmark.plan import _finished_run
+    from agents.training.recipes import resolve_recipe
 
     out, _, _ = tiny_run
     run = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0")
@@ -202,7 +203,8 @@ def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_
     """A run stores its evaluation's errors averaged over the episodes (not every episode's); the
     error-norm figure's mean of the runs' means is the mean over every (run, episode), episodes
     that ended early padded with their last value -- also for runs stored with every episode."""
-    from agents.benchmark import _mean_trajectory, _run_means
+    from agents.benchmark.report import _run_means
+    from agents.benchmark.tasks import mean_trajectory
 
     out, _, _ = tiny_run
     res = json.load(open(os.path.join(out, "models", "tracking", "tiny", "ppo", "s0", "result.json")))
@@ -213,10 +215,10 @@ def test_runs_keep_mean_trajectories_that_give_the_mean_over_every_episode(tiny_
     runs = [[rng.uniform(size=L) for L in ls] for ls in lengths]
     episodes = [e for r in runs for e in r]
     want = np.mean([np.concatenate([e, np.full(20 - len(e), e[-1])]) for e in episodes], axis=0)
-    compact = [{"tracking_error_mean": _mean_trajectory(r).tolist()} for r in runs]
+    compact = [{"tracking_error_mean": mean_trajectory(r).tolist()} for r in runs]
     old = [{"tracking_error": [e.tolist() for e in r]} for r in runs]
     for stored in (compact, old):
-        got = _mean_trajectory([_run_means(r, "tracking_error") for r in stored])
+        got = mean_trajectory([_run_means(r, "tracking_error") for r in stored])
         np.testing.assert_allclose(got, want, rtol=1e-14)
 
 
@@ -326,7 +328,7 @@ def test_a_finished_run_of_another_configuration_is_replaced_only_with_overwrite
     into the same directory: the benchmark refuses to replace the finished run there unless told to."""
     import shutil
 
-    from agents.benchmark import RunConflictError
+    from agents.benchmark.plan import RunConflictError
 
     out, _, _ = tiny_run
     stored = os.path.join(out, "models", "tracking", "tiny", "ppo", "s0", "result.json")

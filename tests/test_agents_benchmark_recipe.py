@@ -8,7 +8,8 @@ import os
 
 import pytest
 
-from agents.benchmark import AGENTS, BUDGETS, run_benchmark
+from agents.benchmark.driver import run_benchmark
+from agents.benchmark.plan import AGENTS, BUDGETS
 from dobs_envs.cli import main
 
 TINY = BUDGETS["tiny"]
@@ -74,7 +75,7 @@ def test_recipe_agent_trains_with_the_file_beside_the_shipped_recipe(tmp_path, c
 
 def test_agents_may_name_only_the_recipe_agent(tmp_path, capsys):
     """``--agents ppo@recipe`` plans only the file's runs, with the base agent's budget."""
-    from agents.benchmark import plan_runs
+    from agents.benchmark.plan import plan_runs
 
     f = _recipe(tmp_path / "best.yml", "default")
     plan = plan_runs("all", "tiny", str(tmp_path / "o"), agents=["ppo_ma@recipe"], recipes={"ppo_ma": f})
@@ -107,7 +108,7 @@ def test_recipe_usage_errors_exit_2(case, needle, tmp_path, capsys):
 
 
 def test_run_benchmark_rejects_a_file_without_the_env_section(tmp_path):
-    from agents.config import HyperparamsError
+    from agents.config.hyperparam_files import HyperparamsError
 
     f = _recipe(tmp_path / "hetero.yml", "dobs_envs/HeteroMAS-v0")
     with pytest.raises(HyperparamsError, match="has no section 'dobs_envs/Tracking-v0'"):

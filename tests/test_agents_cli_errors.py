@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from agents.benchmark import BUDGETS
+from agents.benchmark.plan import BUDGETS
 from dobs_envs.cli import main
 
 TINY_PPO = json.dumps(BUDGETS["tiny"]["hyperparams"]["ppo"])
@@ -178,7 +178,8 @@ def _user_dir(tmp_path):
 
 def test_benchmark_refuses_a_directory_with_user_files(tmp_path, capsys):
     """Item 2: ``summary.json`` and ``<env>/results.csv`` of the user are never overwritten silently."""
-    from agents.benchmark import MARKER, OutDirError, foreign_entries, run_benchmark
+    from agents.benchmark.driver import run_benchmark
+    from agents.benchmark.store import MARKER, OutDirError, foreign_entries
 
     d = _user_dir(tmp_path)
     assert foreign_entries(str(d)) == ["summary.json", "tracking"]
@@ -199,7 +200,7 @@ def test_benchmark_refuses_a_directory_with_user_files(tmp_path, capsys):
 
 
 def _benchmark_layout(root, marker: bool):
-    from agents.benchmark import MARKER
+    from agents.benchmark.store import MARKER
 
     run = root / "models" / "tracking" / "tiny" / "ppo" / "s0"
     run.mkdir(parents=True)
@@ -219,7 +220,7 @@ def _benchmark_layout(root, marker: bool):
 def test_benchmark_accepts_its_own_directory(tmp_path, marker):
     """A previous benchmark's --out (its runs reused) is accepted without --overwrite; with the marker,
     or, written before the marker existed, when models/ holds a run of the layout."""
-    from agents.benchmark import claim_out_dir, foreign_entries
+    from agents.benchmark.store import claim_out_dir, foreign_entries
 
     run = _benchmark_layout(tmp_path, marker)
     assert foreign_entries(str(tmp_path)) == []
@@ -234,7 +235,7 @@ def test_benchmark_accepts_its_own_directory(tmp_path, marker):
 
 
 def test_benchmark_claims_an_empty_or_new_directory(tmp_path):
-    from agents.benchmark import MARKER, claim_out_dir, foreign_entries
+    from agents.benchmark.store import MARKER, claim_out_dir, foreign_entries
 
     (tmp_path / "empty").mkdir()
     for d in (tmp_path / "new", tmp_path / "empty"):

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.config import gym_factory, parallel_factory
+from agents.config.envs import gym_factory, parallel_factory
 from agents.evaluate import evaluate_policy
-from agents.hybrid import (ResidualGymWrapper, ResidualParallelEnv, ResidualPolicy,
-                           behaviour_cloning_dataset, pretrain_ppo)
+from agents.training.hybrid import (ResidualGymWrapper, ResidualParallelEnv, ResidualPolicy, behaviour_cloning_dataset,
+                                    pretrain_ppo)
 from baselines.policies import CentralizedSeparationPolicy, SeparationPolicy
 
 KW = {"max_cycles": 40}

@@ -11,10 +11,11 @@ import os
 
 import pytest
 
-from agents.config import (ALGOS, ENVS, HYPERPARAMS_DIR, HyperparamsError, load_hyperparams, parse_kwargs_string,
-                           read_hyperparams_file)
-from agents.algos import torch_policy_kwargs
-from agents.recipes import resolve_recipe
+from agents.config.hyperparam_files import (ALGOS, HYPERPARAMS_DIR, HyperparamsError, load_hyperparams,
+                                            parse_kwargs_string, read_hyperparams_file)
+from agents.config.envs import ENVS
+from agents.training.algos import torch_policy_kwargs
+from agents.training.recipes import resolve_recipe
 
 FROZEN = os.path.join(os.path.dirname(__file__), "data", "recipes.json")
 
@@ -152,16 +153,17 @@ def test_overrides_accept_both_vocabularies():
 
 def test_rl_zoo3_evaluation_bound_documented_is_the_tasks():
     """rl-zoo3 evaluates with the recipe's training-only env_kwargs (its eval env and rl_zoo3.enjoy);
-    the docs (integrations page) and agents/config.py tell how to give it the task's own state_bound."""
+    the docs (integrations page) and agents/config/hyperparam_files.py tell how to give it the task's own
+    state_bound."""
     import os
     import re
 
-    from agents.config import HYPERPARAMS_DIR
+    from agents.config.hyperparam_files import HYPERPARAMS_DIR
     from dobs_envs.envs.options import EnvOptions
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     readme = open(os.path.join(root, "docs", "integrations.md")).read()
-    import agents.config as cfg
+    import agents.config.hyperparam_files as cfg
 
     task = EnvOptions.defaults()["state_bound"]
     for text in (readme, cfg.__doc__, open(os.path.join(HYPERPARAMS_DIR, "ppo.yaml")).read()):

@@ -15,11 +15,11 @@ import time
 import numpy as np
 import pytest
 
-from agents.benchmark import BUDGETS
-from agents.recipes import resolve_recipe
-from agents.runs import RunDirError, read_run_config, resume_point
+from agents.benchmark.plan import BUDGETS
+from agents.training.recipes import resolve_recipe
+from agents.training.runs import RunDirError, read_run_config, resume_point
 from proc_tree import alive as _alive, children as _children
-from agents.train import resume
+from agents.training.train import resume
 from dobs_envs.cli import main
 
 TINY_PPO = BUDGETS["tiny"]["hyperparams"]["ppo"]
@@ -268,7 +268,7 @@ def test_second_sigint_aborts_at_once(tmp_path, python_sigint_handler):
     resumes from its last checkpoint, and the default SIGINT handler is back."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agents.train import TrainingInterrupted, train
+    from agents.training.train import TrainingInterrupted, train
 
     class TwoSigints(BaseCallback):
         survived_first = False
@@ -343,7 +343,7 @@ def test_a_truncated_normaliser_is_not_a_complete_checkpoint(tmp_path):
     pick that checkpoint (the pickle's opcodes are parsed, nothing is executed)."""
     import pickle
 
-    from agents.runs import _complete_pickle
+    from agents.training.runs import _complete_pickle
 
     whole = pickle.dumps({"obs_rms": list(range(100))})
     for name, data, ok in (("whole", whole, True), ("empty", b"", False), ("cut", whole[:-7], False)):

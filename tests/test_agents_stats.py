@@ -1,11 +1,11 @@
-"""agents.stats implements rliable's IQM and stratified bootstrap: checked against rliable itself."""
+"""agents.benchmark.stats implements rliable's IQM and stratified bootstrap: checked against rliable itself."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agents.stats import (improvement_estimate, interval_estimate, iqm, mean_estimate, probability_of_improvement,
-                          run_bootstrap, run_scores, stratified_bootstrap_ci)
+from agents.benchmark.stats import (improvement_estimate, interval_estimate, iqm, mean_estimate,
+                                    probability_of_improvement, run_bootstrap, run_scores, stratified_bootstrap_ci)
 
 
 def test_iqm_is_the_25_percent_trimmed_mean():

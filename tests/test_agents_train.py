@@ -10,10 +10,10 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from agents.algos import BACKENDS, LEGACY_LIBRARY, backend
-from agents.config import ALGOS, load_hyperparams
-from agents.loading import load_agent
-from agents.train import train
+from agents.training.algos import BACKENDS, LEGACY_LIBRARY, backend
+from agents.config.hyperparam_files import ALGOS, load_hyperparams
+from agents.training.loading import load_agent
+from agents.training.train import train
 
 
 class PointMasses(ParallelEnv):
@@ -158,7 +158,7 @@ def test_training_leaves_nothing_in_the_temp_dir(tmp_path, monkeypatch):
     runs log to stdout only (or to --tensorboard), so nothing is left behind."""
     import tempfile
 
-    from agents.train import train
+    from agents.training.train import train
 
     tmp = tmp_path / "tmp"
     tmp.mkdir()

@@ -1,4 +1,4 @@
-"""``dobs-envs tune`` (agents/tune.py) on a real local Ray (``ray.init(num_cpus=2)``), real Optuna and
+"""``dobs-envs tune`` (agents/tune/) on a real local Ray (``ray.init(num_cpus=2)``), real Optuna and
 ASHA: a 3-trial study of a few hundred env steps writes trials.csv/png and a best.yml that ``train``
 accepts; every episode a trial is scored on is a tuning episode, never an evaluation one; an
 interrupted study (SIGINT, Tune's own Ctrl-C handling) resumes without running finished trials again."""
@@ -16,10 +16,13 @@ ray = pytest.importorskip("ray")
 pytest.importorskip("ray.tune")
 pytest.importorskip("optuna")
 
-from agents.config import gym_id, read_hyperparams_file  # noqa: E402
-from agents.recipes import resolve_recipe  # noqa: E402
-from agents.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
-from agents.tune import SearchSpace, StudySpec, run_study  # noqa: E402
+from agents.config.envs import gym_id  # noqa: E402
+from agents.config.hyperparam_files import read_hyperparams_file  # noqa: E402
+from agents.training.recipes import resolve_recipe  # noqa: E402
+from agents.training.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
+from agents.tune.space import SearchSpace  # noqa: E402
+from agents.tune.spec import StudySpec  # noqa: E402
+from agents.tune.study import run_study  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 
 # tiny: 2 env copies, 512 env steps per trial (rollouts of 64 x 2), 2 tuning episodes of 20 control periods

@@ -7,7 +7,8 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from agents.vec_env import ParallelVecEnv, SlotEncoder
+from agents.vecenv.parallel import ParallelVecEnv
+from agents.vecenv.slots import SlotEncoder
 
 
 class TinyParallel(ParallelEnv):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.config import FAULT_FREE, TASKS, ENVS
+from agents.config.envs import FAULT_FREE, TASKS, ENVS
 from baselines import PooledKalmanPolicy, PooledLQGPolicy
 from baselines.policies import SeparationPolicy
 from baselines.pooled import FaultedEstimatesError, PooledKalmanFilter, PooledObservationError

@@ -1,4 +1,4 @@
-"""The SB3 VecEnv over the batched core (agents.core_vec_env.CoreVecEnv): the same streams as
+"""The SB3 VecEnv over the batched core (agents.vecenv.batched_core.CoreVecEnv): the same streams as
 today's DummyVecEnv of Gymnasium envs (centralised) and ParallelVecEnv of PettingZoo envs
 (parameter-shared), autoreset/terminal observations, truncation flags, seeding, training."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 import dobs_envs  # noqa: F401
-from agents.core_vec_env import CoreVecEnv
-from agents.training_envs import build_vec_env, core_of
-from agents.vec_env import ParallelVecEnv
+from agents.vecenv.batched_core import CoreVecEnv
+from agents.training.env_factory import build_vec_env, core_of
+from agents.vecenv.parallel import ParallelVecEnv
 from dobs_envs import hetero_mas_v0, random_network_v0, tracking_v0
 from dobs_envs.envs import HeteroMASEnv, RandomNetworkEnv, TrackingEnv
 
@@ -111,7 +111,7 @@ def test_build_vec_env_uses_the_core_for_dobs_envs_only():
     pend = build_vec_env("Pendulum-v1", n_envs=2, seed=0)
     assert isinstance(pend, DummyVecEnv)
     res = build_vec_env("tracking", n_envs=2, seed=0, residual_scale=0.2)
-    assert isinstance(res, DummyVecEnv)  # the residual wrappers of agents.hybrid
+    assert isinstance(res, DummyVecEnv)  # the residual wrappers of agents.training.hybrid
     assert core_of("dobs_envs/Tracking-v0", 2, {"horizon": 1.0}, False).max_cycles == 20
     assert core_of(tracking_v0.parallel_env, 2, None, True) is None
 

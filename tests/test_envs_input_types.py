@@ -123,7 +123,7 @@ def test_core_refuses_bool_and_complex_inputs(kind):
 @pytest.mark.parametrize("shared", [False, True])
 @pytest.mark.parametrize("kind", ["bool", "complex"])
 def test_core_vec_env_refuses_bool_and_complex_actions(kind, shared):
-    from agents.core_vec_env import CoreVecEnv
+    from agents.vecenv.batched_core import CoreVecEnv
 
     venv = CoreVecEnv(TrackingEnv.make_core(2), shared=shared)
     venv.reset()

@@ -126,7 +126,7 @@ def test_vector_env_infos():
 @pytest.mark.parametrize("shared", [False, True])
 @pytest.mark.parametrize("diagnostics", [False, True])
 def test_core_vec_env_infos(shared, diagnostics):
-    from agents.core_vec_env import CoreVecEnv
+    from agents.vecenv.batched_core import CoreVecEnv
     from dobs_envs.envs import HeteroMASEnv
 
     expected = {"TimeLimit.truncated", "termination_reason"}

@@ -44,7 +44,7 @@ def test_gym_registration_reads_the_registry(name):
 
 
 def test_agents_config_reads_the_registry():
-    from agents import config
+    from agents.config import envs as config
 
     assert config.ENVS == {n: (e.gym_id, e.module) for n, e in registry.ENVIRONMENTS.items()}
 

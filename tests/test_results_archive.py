@@ -8,7 +8,7 @@ import tarfile
 
 import pytest
 
-from agents.benchmark import pending_runs, plan_runs
+from agents.benchmark.plan import pending_runs, plan_runs
 from readme_tables import check_readme_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -77,7 +77,7 @@ def test_the_published_tables_are_what_the_stored_runs_give(extracted):
     printed in ``docs/results``: the analytic controllers are evaluated again on the same seeded episodes,
     the statistics recomputed from the stored per-episode costs; numbers are compared, each with a
     tolerance suited to its quantity."""
-    from agents.benchmark import run_benchmark
+    from agents.benchmark.driver import run_benchmark
 
     name, out = extracted
     env, budget, _, headings, agents = ARCHIVES[name]
@@ -90,7 +90,8 @@ def test_the_published_tables_are_what_the_stored_runs_give(extracted):
 def test_other_evaluation_episodes_would_retrain_and_are_refused(extracted):
     """The archives keep no models: evaluating on other episodes means training again, which would
     replace the stored records, so the benchmark refuses unless told to overwrite."""
-    from agents.benchmark import RunConflictError, reevaluated_runs, replaced_runs, run_benchmark
+    from agents.benchmark.driver import run_benchmark
+    from agents.benchmark.plan import RunConflictError, reevaluated_runs, replaced_runs
 
     name, out = extracted
     env, budget, runs, _, agents = ARCHIVES[name]

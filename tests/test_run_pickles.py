@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import dobs_envs
-from agents.benchmark import BUDGETS
-from agents.run_pickles import PickleRefused, load_replay_buffer, load_vecnormalize
+from agents.benchmark.plan import BUDGETS
+from agents.training.run_pickles import PickleRefused, load_replay_buffer, load_vecnormalize
 from dobs_envs.cli import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(dobs_envs.__file__)))
@@ -90,7 +90,7 @@ def test_crafted_pickles_run_no_code(crafted, run_dir, tmp_path):
 
 def test_rebuilt_model_entries_are_never_read(run_dir, tmp_path):
     """The schedule's payload in ``model.zip`` is replaced by the recipe's own (``config.json``): never unpickled."""
-    from agents.loading import load_agent
+    from agents.training.loading import load_agent
 
     d = tmp_path / "r"
     shutil.copytree(run_dir, d)
@@ -105,9 +105,9 @@ def test_genuine_run_evaluates_as_before(run_dir):
     normalised observations, the same evaluation episodes."""
     from stable_baselines3 import PPO
 
-    from agents.config import gym_factory
+    from agents.config.envs import gym_factory
     from agents.evaluate import evaluate_policy, summarise
-    from agents.loading import TrainedAgent, load_agent
+    from agents.training.loading import TrainedAgent, load_agent
 
     agent = load_agent(run_dir)
     with open(os.path.join(run_dir, "vecnormalize.pkl"), "rb") as fh:
@@ -151,8 +151,8 @@ def test_sbx_run_loads_without_unpickling_its_networks(tmp_path):
     """SBX keeps its networks in the cloudpickled ``policy`` entry: their arrays are read as data into a fresh
     policy (same actions as SBX's own unrestricted load); a payload there runs nothing and is refused."""
     pytest.importorskip("sbx")
-    from agents.algos import backend_of
-    from agents.loading import load_agent
+    from agents.training.algos import backend_of
+    from agents.training.loading import load_agent
 
     out = str(tmp_path / "sac")
     assert main(["train", "--env", "tracking", "--algo", "sac", "--timesteps", "64", "--out", out, "--no-progress",
@@ -165,8 +165,8 @@ def test_sbx_run_loads_without_unpickling_its_networks(tmp_path):
     # what train --resume restores (optimizer states too): every array equal to SBX's own load
     import jax
 
-    from agents.recipes import recipe_from_hyperparams
-    from agents.run_pickles import graft_sbx, model_custom_objects, sbx_payloads
+    from agents.training.recipes import recipe_from_hyperparams
+    from agents.training.run_pickles import graft_sbx, model_custom_objects, sbx_payloads
 
     b, path = backend_of("sac", "sbx-rl"), os.path.join(out, "model.zip")
     recipe = recipe_from_hyperparams("sac", "tracking", agent.config["hyperparams"])

@@ -156,8 +156,8 @@ def test_pettingzoo_api_with_the_options(kw):
 
 
 def test_core_vec_env_uses_the_env_spaces():
-    from agents.core_vec_env import CoreVecEnv
-    from agents.vec_env import ParallelVecEnv
+    from agents.vecenv.batched_core import CoreVecEnv
+    from agents.vecenv.parallel import ParallelVecEnv
 
     core = RandomNetworkEnv.make_core(2, max_cycles=5, **HETERO, **BOTH)
     va = CoreVecEnv(core, shared=True)

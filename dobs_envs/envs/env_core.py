@@ -3,7 +3,7 @@
 Every adapter -- the PettingZoo ``ParallelEnv`` and its AEC form
 (:mod:`dobs_envs.envs.parallel_env`), the centralised Gymnasium ``Env``
 (:mod:`dobs_envs.envs.centralized`), the Gymnasium ``VectorEnv``
-(:mod:`dobs_envs.envs.vector`) and the SB3 ``VecEnv`` (``agents.core_vec_env``) -- drives an
+(:mod:`dobs_envs.envs.vector`) and the SB3 ``VecEnv`` (``agents.vecenv.batched_core``) -- drives an
 :class:`EnvCore` through this public API only.
 
 Conventions: batch dimension first; ``K`` agents (controller nodes), ``N`` observer

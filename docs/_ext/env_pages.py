@@ -140,8 +140,8 @@ def env_page(entry) -> str:
 
 
 def budgets_table() -> str:
-    """The benchmark's budgets (:data:`agents.bench_plan.BUDGETS`) as a Markdown table."""
-    from agents.bench_plan import AGENTS, BUDGETS
+    """The benchmark's budgets (:data:`agents.benchmark.plan.BUDGETS`) as a Markdown table."""
+    from agents.benchmark.plan import AGENTS, BUDGETS
 
     rows = ["| budget | training runs per agent | evaluation episodes | agents: environment steps per run |",
             "|---|---|---|---|"]

@@ -1,5 +1,5 @@
 """Run as a script (by tests/clients/test_rl_zoo3.py): what rl-zoo3's ExperimentManager makes of
-agents/hyperparams/<algo>.yaml for every dobs_envs Gymnasium id, as JSON on stdout.
+agents/config/hyperparams/<algo>.yaml for every dobs_envs Gymnasium id, as JSON on stdout.
 
 A separate process because ``import rl_zoo3`` patches Gymnasium's ``TimeLimit`` for the whole
 process (rl_zoo3/gym_patches.py adds a ``TimeLimit.truncated`` info key), which would leak into
@@ -38,7 +38,8 @@ def reading(algo: str, gym_id: str, config: str, log_folder: str) -> dict:
 
 def main() -> None:
     import dobs_envs  # noqa: F401  (registers the ids, as --gym-packages dobs_envs does)
-    from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR
+    from agents.config.hyperparam_files import ALGOS, HYPERPARAMS_DIR
+    from agents.config.envs import ENVS
 
     result = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,4 +1,4 @@
-"""rl-zoo3 (the real client, ``clients`` extra) on agents/hyperparams/*.yaml: its own CLI trains
+"""rl-zoo3 (the real client, ``clients`` extra) on agents/config/hyperparams/*.yaml: its own CLI trains
 on ``dobs_envs/Tracking-v0`` with our file, and its own reading of every section it would use
 gives the recipe agents/ trains with (one file serves both; issue 9).
 
@@ -16,8 +16,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.config import ALGOS, ENVS, HYPERPARAMS_DIR, read_hyperparams_file
-from agents.recipes import resolve_recipe
+from agents.config.hyperparam_files import ALGOS, HYPERPARAMS_DIR, read_hyperparams_file
+from agents.config.envs import ENVS
+from agents.training.recipes import resolve_recipe
 
 if importlib.util.find_spec("rl_zoo3") is None:  # as conftest.require, without importing it here
     if os.environ.get("CI"):
@@ -29,7 +30,7 @@ ENV = dict(os.environ, MPLBACKEND="Agg")
 
 
 def test_rl_zoo3_cli_trains_with_our_file(tmp_path):
-    """``python -m rl_zoo3.train ... -conf agents/hyperparams/ppo.yaml`` for 2k steps (one
+    """``python -m rl_zoo3.train ... -conf agents/config/hyperparams/ppo.yaml`` for 2k steps (one
     PPO rollout of 8 x 512), with the recipe's training-only state bound and [-1, 1] actions.
     The saved model is inspected in a subprocess too: it pickles rl-zoo3's schedule objects,
     so loading it imports rl_zoo3."""

@@ -6,19 +6,19 @@
 
 1. **Train** every agent of the budget with several training seeds, in parallel
    (``--backend``: worker processes by default, ``--workers`` of them, one per core; or Ray
-   tasks on a local Ray or a cluster, :mod:`agents.bench_exec`): pure RL (centralised PPO,
+   tasks on a local Ray or a cluster, :mod:`agents.benchmark.backends`): pure RL (centralised PPO,
    parameter-shared PPO; ``full`` adds SAC, TD3 and PPO trained on the sqrt cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
-   behaviour cloning), each with the recipe of ``agents/hyperparams/<algo>.yaml``; ``--recipe
+   behaviour cloning), each with the recipe of ``agents/config/hyperparams/<algo>.yaml``; ``--recipe
    AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
    tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
-   Each run records its learning curve (:mod:`agents.curves`). A finished run is
+   Each run records its learning curve (:mod:`agents.training.curves`). A finished run is
    reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
    so an interrupted benchmark resumes where it stopped.
 2. **Evaluate** every policy -- the trained agents, the paper's separation
    controller, the full-state oracle, the no-communication decentralised controller
    and zero input -- on the *same* ``K`` episodes of the task's own environment
    (reset with seeds ``eval_seed + k``, recorded with each episode's ``x(0)``).
-3. **Aggregate** as rliable defines it, with the training run as the unit (:mod:`agents.stats`):
+3. **Aggregate** as rliable defines it, with the training run as the unit (:mod:`agents.benchmark.stats`):
    a run's score is the mean over the episodes of the cost ratio ``J_policy / J_paper`` on the
    same episode (< 1: cheaper than the paper's controller); the IQM and the mean of the run
    scores with 95 % percentile-bootstrap CIs that resample whole runs, the probability of
@@ -27,16 +27,16 @@
    failure rate; each row states its budget and the information its policy acts on. On an env with
    communication faults (``tracking_lossy``) each row also has the **degradation** ``J_policy /
    J_paper,fault-free``: its cost relative to the paper's controller on the fault-free counterpart
-   (``tracking``) on the same episodes, with the same statistics (:mod:`agents.bench_report`).
+   (``tracking``) on the same episodes, with the same statistics (:mod:`agents.benchmark.report`).
 4. **Write** ``<out>/<env>/results.{json,csv}``, ``error_norms.png``,
    ``learning_curves.png`` and ``<out>/summary.{json,png}`` (every env's cost ratios
    with their CIs).
 
-Modules: :mod:`agents.bench_plan` (agent and budget tables, what trains, what a stored run
-answers), :mod:`agents.bench_exec` (execution backends), :mod:`agents.bench_tasks` (the work
-units a worker runs), :mod:`agents.bench_store` (the ``--out`` directory and the run records the
-driver writes), :mod:`agents.bench_report` (aggregation, tables, figures); this module is the
-driver, :func:`run_benchmark`, and re-exports their public names.
+Modules: :mod:`agents.benchmark.plan` (agent and budget tables, what trains, what a stored run
+answers), :mod:`agents.benchmark.backends` (execution backends), :mod:`agents.benchmark.tasks` (the work
+units a worker runs), :mod:`agents.benchmark.store` (the ``--out`` directory and the run records the
+driver writes), :mod:`agents.benchmark.report` (aggregation, tables, figures); this module is the
+driver, :func:`run_benchmark`.
 
 Budgets (environment steps per agent and seed; wall times on a 2-core CPU in the README):
 
@@ -50,27 +50,18 @@ from __future__ import annotations
 import shutil
 import time
 
-from .bench_exec import BACKENDS, Job, make_backend
-# the names below are re-exported: ``agents.benchmark`` stays the public entry of the split modules
-from .bench_plan import (AGENTS, ANALYTIC, ANALYTIC_INFO, BUDGETS, CURVE_SEED, INFO_OWN_NODE,  # noqa: F401
-                         INFO_POOLED, PAPER, RECIPE_SUFFIX, REEVALUATE, REUSE, TRAINING_KEYS, AgentSpec, BenchmarkPlan,
-                         RunConflictError, _finished_run, _run_signature, _stored_model, _stored_result,
-                         _training_overrides, pending_runs, plan_runs, reevaluated_runs, replaced_runs, stored_answer)
-from .bench_report import (PAPER_NOTES, STATISTICS_DOC, SUMMARY_XMAX, TABLE_COLUMNS, _aggregate,  # noqa: F401
-                           _run_means, aggregate_over_envs, format_markdown, format_table, summarise_dicts,
-                           write_env_report, write_summary)
-from .bench_store import (MARKER, OutDirError, claim_out_dir, foreign_entries, read_run_files,  # noqa: F401
-                          write_record)
-from .bench_tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate
-from .bench_tasks import mean_trajectory as _mean_trajectory  # noqa: F401  (the name of earlier releases)
-from .config import FAULT_FREE
+from ..config.envs import FAULT_FREE
+from .backends import Job, make_backend
+from .plan import (REEVALUATE, REUSE, BenchmarkPlan, RunConflictError, pending_runs, plan_runs, replaced_runs,
+                   stored_answer)
+from .report import write_env_report, write_summary
+from .store import claim_out_dir, read_run_files, write_record
+from .tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate
 
-__all__ = ["AGENTS", "BUDGETS", "run_benchmark", "plan_runs", "pending_runs", "reevaluated_runs", "replaced_runs",
-           "BenchmarkPlan", "RunConflictError", "format_table", "AgentSpec", "BACKENDS", "OutDirError", "MARKER",
-           "foreign_entries", "claim_out_dir", "stored_answer"]
+__all__ = ["run_benchmark", "FAULT_FREE_PAPER"]
 
 #: the job key of the paper's controller on an env's fault-free counterpart
-#: (:func:`agents.bench_tasks.fault_free_paper`)
+#: (:func:`agents.benchmark.tasks.fault_free_paper`)
 FAULT_FREE_PAPER = "fault_free_paper"
 
 
@@ -109,7 +100,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
 
     Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's; ``agent_seeds``
     ``{agent: number}`` gives some agents another number, :func:`plan_runs`).
-    ``backend`` (:data:`BACKENDS`, :mod:`agents.bench_exec`): ``"process"`` (default): ``workers``
+    ``backend`` (:data:`agents.benchmark.backends.BACKENDS`): ``"process"`` (default): ``workers``
     processes train in parallel (default: the number of CPU cores, at most 8); ``"serial"``: one
     after another in this process; ``"ray"``: Ray tasks of ``threads`` CPUs each, on a local Ray
     of ``workers`` CPUs (default: the machine's) or on the cluster at ``address`` (``"auto"``,

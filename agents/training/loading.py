@@ -2,11 +2,11 @@
 or one of its checkpoints) into a :class:`TrainedAgent`, which acts on the task's own environment.
 
 Observations are normalised with the statistics saved with the model (``vecnormalize.pkl``); a
-multi-agent (parameter-shared) agent acts through :class:`agents.vec_env.SlotEncoder` (the padding and
+multi-agent (parameter-shared) agent acts through :class:`agents.vecenv.slots.SlotEncoder` (the padding and
 one-hot agent id of training); a residual agent is composed with the paper's controller. The model is
-loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.algos.backend_of`).
-``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.run_pickles`:
-a refused class raises :class:`agents.run_pickles.PickleRefused`, a :class:`RunDirError`; SBX networks are
+loaded by the implementation the run records (``config.json`` ``library``; :func:`agents.training.algos.backend_of`).
+``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.training.run_pickles`:
+a refused class raises :class:`agents.training.run_pickles.PickleRefused`, a :class:`RunDirError`; SBX networks are
 read as arrays into a fresh policy).
 """
 from __future__ import annotations
@@ -15,12 +15,12 @@ from typing import Callable
 
 import numpy as np
 
+from ..vecenv.slots import SlotEncoder
 from .algos import BackendUnavailable, backend_of
 from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
-from .vec_env import SlotEncoder
 
-__all__ = ["TrainedAgent", "load_agent"]
+__all__ = ["TrainedAgent", "load_agent", "evaluate_model"]
 
 
 class TrainedAgent:
@@ -28,7 +28,7 @@ class TrainedAgent:
 
     ``central_policy()`` -> ``obs -> action`` (Gymnasium env);
     ``parallel_policy(env)`` -> ``{agent: obs} -> {agent: action}`` (PettingZoo env,
-    shared policy, same padding/one-hot as :class:`agents.vec_env.ParallelVecEnv`).
+    shared policy, same padding/one-hot as :class:`agents.vecenv.parallel.ParallelVecEnv`).
     """
 
     @classmethod
@@ -58,7 +58,7 @@ class TrainedAgent:
             algo_backend = backend_of(self.algo, self.config.get("library"))
         except BackendUnavailable as exc:
             raise RunDirError(f"{files.run_dir!r}: {exc}") from None
-        # the pickles first, checked without running code from them (agents.run_pickles), then the model
+        # the pickles first, checked without running code from them (agents.training.run_pickles), then the model
         vn = files.vecnormalize
         self.vecnorm = None if vn is None else load_vecnormalize(vn)  # without its venv: only obs_rms is used
         recipe = _run_recipe(files)
@@ -80,7 +80,7 @@ class TrainedAgent:
     def policy_for(self, env, deterministic: bool = True) -> Callable:
         """The agent acting on the task's own env ``env`` (the PettingZoo env when the agent
         is multi-agent, else the centralised Gymnasium env): ``obs -> applied input``.
-        A residual agent is composed with the paper's controller (:class:`agents.hybrid.ResidualPolicy`)."""
+        A residual agent is composed with the paper's controller (:class:`agents.training.hybrid.ResidualPolicy`)."""
         if self.hybrid == "residual":
             from .hybrid import ResidualPolicy
 
@@ -144,7 +144,7 @@ class TrainedAgent:
 
 
 def _run_recipe(files):
-    """The :class:`agents.recipes.Recipe` of a run (its ``config.json``): what the model's rebuilt objects
+    """The :class:`agents.training.recipes.Recipe` of a run (its ``config.json``): what the model's rebuilt objects
     come from."""
     from .recipes import recipe_from_hyperparams
 
@@ -157,6 +157,58 @@ def _run_recipe(files):
 
 
 def load_agent(path: str, device: str = "cpu") -> TrainedAgent:
-    """Load a run directory written by :func:`agents.train.train` (or its ``model.zip``, or one of its
+    """Load a run directory written by :func:`agents.training.train.train` (or its ``model.zip``, or one of its
     checkpoints ``<run>/checkpoints/<algo>_<steps>_steps.zip`` with the normaliser saved next to it)."""
     return TrainedAgent(path, device=device)
+
+
+def evaluate_model(path: str, episodes: int, seed: int, *, progress: bool = True,
+                   allow_custom_env: bool = False) -> dict:
+    """Evaluate a saved run directory (``dobs-envs evaluate``) on its own environment.
+
+    ``path`` is a run directory, its ``model.zip`` or one of its checkpoints
+    (``<run>/checkpoints/<algo>_<steps>_steps.zip``, evaluated with the normaliser saved with it);
+    the summary names the model file (``model``).
+
+    The environment named in the run's ``config.json`` must be a registered one
+    (:func:`agents.config.envs.check_env_name`); a ``module:attr`` name is refused unless
+    ``allow_custom_env`` (a file must never make us import code). ``model.zip`` and
+    ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.training.run_pickles`; a refused
+    class raises :class:`agents.training.run_pickles.PickleRefused`).
+    """
+    from baselines.references import base_env
+
+    from ..config.envs import check_env_name, gym_factory, parallel_factory
+    from ..evaluate import evaluate_policy, summarise
+    from .runs import read_run_config
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    cfg = read_run_config(path)
+    check_env_name(cfg.get("env"), multi_agent=bool(cfg.get("multi_agent")), allow_custom=allow_custom_env,
+                   what="the run's environment (config.json 'env')")
+    agent = load_agent(path)
+    cfg = agent.config
+    # the task's own env (a recipe's training-only options, cfg["train_env_kwargs"], do not apply)
+    env = (parallel_factory if agent.multi_agent else gym_factory)(cfg["env"], cfg.get("env_kwargs"))()
+    pol = agent.policy_for(env)
+    try:
+        base_env(env)
+    except TypeError:
+        # not a dobs_envs environment (e.g. Pendulum-v1): returns only
+        rets = []
+        for k in range(episodes):
+            obs, _ = env.reset(seed=seed + k)
+            R, done = 0.0, False
+            while not done:
+                obs, r, term, trunc, _ = env.step(pol(obs))
+                R += float(r)
+                done = term or trunc
+            rets.append(R)
+        env.close()
+        return {"policy": agent.name, "model": agent.model_path, "episodes": episodes,
+                "seeds": list(range(seed, seed + episodes)),
+                "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets))}
+    res = evaluate_policy(env, pol, episodes, seed, parallel=agent.multi_agent, progress=progress, desc=agent.name)
+    env.close()
+    return {"policy": agent.name, "model": agent.model_path, **summarise(res)}

@@ -16,7 +16,7 @@ ray        Ray tasks (``pip install 'dobs-envs[distributed]'``): without ``addre
 A job is a module-level function and its arguments (pickled by reference: every machine that runs
 jobs must have this package installed) and the CPUs it takes (a Ray task's ``num_cpus``; the
 benchmark sets the worker's torch threads to match). Jobs return plain data; nothing assumes a file
-system shared between the driver and the workers (:mod:`agents.bench_tasks`, :mod:`agents.bench_store`).
+system shared between the driver and the workers (:mod:`agents.benchmark.tasks`, :mod:`agents.benchmark.store`).
 
 A backend is a context manager. Leaving it on an exception (Ctrl-C included) cancels the queued jobs
 and ends the running ones: no worker outlives the benchmark, and a local Ray started for it is shut

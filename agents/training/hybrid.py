@@ -40,7 +40,7 @@ from gymnasium import spaces
 __all__ = ["ResidualPolicy", "ResidualGymWrapper", "ResidualParallelEnv", "behaviour_cloning_dataset",
            "pretrain_ppo", "HYBRIDS"]
 
-#: hybrid kinds (the ``hybrid`` argument of :func:`agents.train.train`)
+#: hybrid kinds (the ``hybrid`` argument of :func:`agents.training.train.train`)
 HYBRIDS = ("residual", "bc")
 
 

@@ -1,5 +1,5 @@
 """Benchmark reporting: the rows of the results table from the runs' records (rliable statistics with
-the training run as the unit, :mod:`agents.stats`), the text and Markdown tables, the figures, and the
+the training run as the unit, :mod:`agents.benchmark.stats`), the text and Markdown tables, the figures, and the
 files ``<out>/<env>/results.{json,csv,md}``, ``error_norms.png``, ``learning_curves.png`` and
 ``<out>/summary.{json,png}`` (:func:`write_env_report`, :func:`write_summary`). On an environment with communication
 faults (``tracking_lossy``) every row also has the degradation ``J / J_paper,fault-free`` (:data:`DEGRADATION_DOC`).
@@ -12,11 +12,11 @@ import os
 
 import numpy as np
 
-from .bench_plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
-from .bench_tasks import mean_trajectory
-from .config import FAULT_FREE
-from .evaluate import STEADY_S, TRANSIENT_S
+from ..config.envs import FAULT_FREE
+from ..evaluate import STEADY_S, TRANSIENT_S
+from .plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
 from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
+from .tasks import mean_trajectory
 
 __all__ = ["write_env_report", "write_summary", "format_table", "format_markdown", "aggregate_over_envs",
            "summarise_dicts", "TABLE_COLUMNS", "DEGRADATION_COLUMNS", "STATISTICS_DOC", "DEGRADATION_DOC",
@@ -42,7 +42,7 @@ STATISTICS_DOC = (
 DEGRADATION_DOC = (
     "degradation = J_policy / J_paper,fault-free: the policy's cost on the environment with communication faults over "
     "the cost of the paper's controller on its fault-free counterpart (the same task with faults=None, "
-    "agents.config.FAULT_FREE) on the same episode: the same seed gives the same initial state and reference (the "
+    "agents.config.envs.FAULT_FREE) on the same episode: the same seed gives the same initial state and reference (the "
     "faulted environment draws its fault seed last from the episode's generator; the report checks x(0)). One "
     "yardstick for every row: 1 is what the paper's controller achieves on the ideal network, the paper's own row is "
     "its degradation under the faults. Statistics as for J / J_paper: a run's score is the mean over the episodes; IQM "
@@ -71,7 +71,7 @@ def _ratio_columns(key: str, cost: np.ndarray, reference: np.ndarray) -> tuple[n
     """The run scores of ``cost (runs, episodes) / reference (episodes,)`` (a run's score: the mean of its
     episodes' ratios) and their statistics as row entries: ``<key>_iqm``, ``<key>_ci_low``, ``<key>_ci_high``
     (IQM over runs, 95 % percentile-bootstrap CI over runs) and ``<key>_mean``, ``<key>_mean_ci_low``,
-    ``<key>_mean_ci_high`` (:mod:`agents.stats`). The one computation behind ``cost_ratio`` (``J / J_paper``)
+    ``<key>_mean_ci_high`` (:mod:`agents.benchmark.stats`). The one computation behind ``cost_ratio`` (``J / J_paper``)
     and ``degradation`` (``J / J_paper,fault-free``)."""
     scores = run_scores(cost / reference[None, :])
     est, mean = interval_estimate(scores), mean_estimate(scores)
@@ -85,7 +85,7 @@ def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray, 
     """Row of the results table from ``runs`` (one payload per training run; one for a deterministic
     analytic controller).
 
-    The training run is the statistical unit (:mod:`agents.stats`): a run's score is the mean of its
+    The training run is the statistical unit (:mod:`agents.benchmark.stats`): a run's score is the mean of its
     per-episode values (cost ratio ``J / J_paper``, failed episodes at their penalty cost; likewise the
     transient cost and the errors); the row gives the IQM of the run scores with a 95 % percentile
     bootstrap CI over runs, the mean cost ratio with its CI (a failure cannot be trimmed away), the
@@ -391,10 +391,10 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
     ``learning_curves.png``; returns ``(rows, results document)``.
 
     ``results``: ``{(env, agent, seed): run payload}`` for every run of ``plan``; ``analytic``: the
-    analytic controllers' payloads on ``env`` by label (:func:`agents.bench_tasks.analytic_results`);
-    ``fault_free``: for an environment with communication faults (:data:`agents.config.FAULT_FREE`, where it
+    analytic controllers' payloads on ``env`` by label (:func:`agents.benchmark.tasks.analytic_results`);
+    ``fault_free``: for an environment with communication faults (:data:`agents.config.envs.FAULT_FREE`, where it
     is required), the paper's controller's payload on the fault-free counterpart
-    (:func:`agents.bench_tasks.fault_free_paper`): every row then has the degradation columns
+    (:func:`agents.benchmark.tasks.fault_free_paper`): every row then has the degradation columns
     (:data:`DEGRADATION_DOC`) and ``results.json`` the counterpart's episodes under ``fault_free``."""
     if (fault_free is not None) != (env in FAULT_FREE):
         raise ValueError(f"{env}: fault_free is the paper's payload on the fault-free counterpart of an env with "

@@ -1,14 +1,14 @@
 """Recipes: what a training run is made of, resolved from the hyperparameter files.
 
-:func:`resolve_recipe` reads ``agents/hyperparams/<algo>.yaml`` (:func:`agents.config.load_hyperparams`,
-overrides merged) and :func:`recipe_from_hyperparams` splits the merged hyperparameters of a run (the
-files', or a run's ``config.json`` ``hyperparams`` on resume) into a :class:`Recipe`: the algorithm's
-constructor arguments as written and the keys only ``agents/`` acts on (environment copies, budget,
-normalisation, hybrids, action noise).
+:func:`resolve_recipe` reads ``agents/config/hyperparams/<algo>.yaml``
+(:func:`agents.config.hyperparam_files.load_hyperparams`, overrides merged) and :func:`recipe_from_hyperparams` splits
+the merged hyperparameters of a run (the files', or a run's ``config.json`` ``hyperparams`` on resume) into a
+:class:`Recipe`: the algorithm's constructor arguments as written and the keys only ``agents/`` acts on (environment
+copies, budget, normalisation, hybrids, action noise).
 
 A recipe is plain data in the files' vocabulary (``lin_`` schedules as strings, activation
 functions as names): turning it into the arguments of the library that implements the algorithm
-is :meth:`agents.algos.AlgoBackend.constructor_kwargs`.
+is :meth:`agents.training.algos.AlgoBackend.constructor_kwargs`.
 """
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from .config import OFF_POLICY_ALGOS, HyperparamsError, env_key, gym_id, load_hyperparams, read_hyperparams_file
+from ..config.envs import env_key, gym_id
+from ..config.hyperparam_files import OFF_POLICY_ALGOS, HyperparamsError, load_hyperparams, read_hyperparams_file
 
 __all__ = ["Recipe", "resolve_recipe", "recipe_from_hyperparams", "recipe_file_section", "merge_overrides", "EXTRA_KEYS"]
 
@@ -28,14 +29,14 @@ EXTRA_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "agent_id", "env_k
 
 @dataclass(frozen=True)
 class Recipe:
-    """What :func:`agents.train.train` derives from the hyperparameter files (and overrides) for one run.
+    """What :func:`agents.training.train.train` derives from the hyperparameter files (and overrides) for one run.
 
     ``algo_kwargs``: the algorithm's constructor arguments as written (``lin_`` schedules
     as strings, ``policy_kwargs.activation_fn`` a name); ``normalize``: ``False`` or the
     ``VecNormalize`` arguments (``gamma`` included); ``train_env_kwargs``: the recipe's
     training-only env options; ``bc``: the warm start's ``{episodes, noise, epochs, lr}``
     (``bc`` variant); ``action_noise_sigma`` and ``action_noise_type``: the off-policy algorithms'
-    action noise (``noise_std``, ``noise_type``; :func:`agents.algos.make_action_noise`), None without.
+    action noise (``noise_std``, ``noise_type``; :func:`agents.training.algos.make_action_noise`), None without.
     """
 
     policy: str
@@ -59,7 +60,7 @@ class Recipe:
 
 def resolve_recipe(algo: str, env_name: str, *, multi_agent: bool = False, hybrid: str | None = None,
                    overrides: dict | None = None) -> Recipe:
-    """The :class:`Recipe` of ``algo`` on ``env_name`` (see :func:`agents.config.load_hyperparams`)."""
+    """The :class:`Recipe` of ``algo`` on ``env_name`` (see :func:`agents.config.hyperparam_files.load_hyperparams`)."""
     algo = algo.lower()
     hp = load_hyperparams(algo, env_name, multi_agent=multi_agent, overrides=overrides, variant=hybrid)
     return recipe_from_hyperparams(algo, env_name, hp, multi_agent=multi_agent, hybrid=hybrid)
@@ -68,7 +69,7 @@ def resolve_recipe(algo: str, env_name: str, *, multi_agent: bool = False, hybri
 def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: bool = False,
                             hybrid: str | None = None) -> Recipe:
     """The :class:`Recipe` of the merged hyperparameters ``hp`` (a run's ``config.json``
-    ``hyperparams``, or :func:`agents.config.load_hyperparams`)."""
+    ``hyperparams``, or :func:`agents.config.hyperparam_files.load_hyperparams`)."""
     residual_scale = None
     if hybrid == "residual":
         residual_scale = hp.get("residual_scale")
@@ -100,9 +101,10 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
 def recipe_file_section(path: str, env_name: str) -> dict:
     """The section of the recipe file ``path`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``)
     that rl-zoo3 would read for ``env_name``: its Gymnasium id's section, else ``default``; in
-    :mod:`agents.config`'s vocabulary, validated by :func:`agents.config.read_hyperparams_file` (nothing
-    named in it is imported). Used as hyperparameter overrides: a complete section replaces the env's
-    recipe key by key. :class:`agents.config.HyperparamsError` names the file when no section applies."""
+    :mod:`agents.config.hyperparam_files`'s vocabulary, validated by
+    :func:`agents.config.hyperparam_files.read_hyperparams_file` (nothing named in it is imported). Used as
+    hyperparameter overrides: a complete section replaces the env's recipe key by key.
+    :class:`agents.config.hyperparam_files.HyperparamsError` names the file when no section applies."""
     if not os.path.isfile(path):
         raise HyperparamsError(f"recipe file {path!r} does not exist")
     table = read_hyperparams_file(path)
@@ -116,7 +118,7 @@ def recipe_file_section(path: str, env_name: str) -> dict:
 
 def merge_overrides(base: dict | None, over: dict | None) -> dict:
     """``over`` merged into a copy of ``base`` (nested mappings merged key by key, as
-    :func:`agents.config.load_hyperparams` merges overrides into a recipe)."""
+    :func:`agents.config.hyperparam_files.load_hyperparams` merges overrides into a recipe)."""
     out = copy.deepcopy(dict(base or {}))
     for k, v in (over or {}).items():
         out[k] = merge_overrides(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) \

@@ -1,9 +1,9 @@
 """The algorithm backends: which library and class implement each algorithm name.
 
 This module is the one place that knows which library trains ``"ppo"``, ``"sac"``, ``"td3"`` and
-``"crossq"``: the class lookup, the constructor arguments made from a :class:`agents.recipes.Recipe`
+``"crossq"``: the class lookup, the constructor arguments made from a :class:`agents.training.recipes.Recipe`
 (action noise included), the logger a model gets, how a model is saved and loaded, and the library
-name and version that :func:`agents.train.train` records in a run's ``config.json`` (``library``,
+name and version that :func:`agents.training.train.train` records in a run's ``config.json`` (``library``,
 ``library_version``).
 
 Implementations (:data:`BACKENDS`, in order of preference; chosen by measurement,
@@ -31,10 +31,10 @@ One :class:`AlgoBackend` in :data:`BACKENDS`, e.g. sb3-contrib's TQC::
 
     AlgoBackend("tqc", library="sb3-contrib", module="sb3_contrib", class_name="TQC")
 
-plus its recipe file ``agents/hyperparams/<name>.yaml`` and the name in
-:data:`agents.config.ALGOS` (and :data:`agents.config.MULTI_AGENT_ALGOS` when it may be
-parameter-shared). Names are lowercase letters and digits: they appear in the checkpoint
-file names ``<name>_<steps>_steps.zip``.
+plus its recipe file ``agents/config/hyperparams/<name>.yaml`` and the name in
+:data:`agents.config.hyperparam_files.ALGOS` (and :data:`agents.config.hyperparam_files.MULTI_AGENT_ALGOS` when it may
+be parameter-shared). Names are lowercase letters and digits: they appear in the checkpoint file names
+``<name>_<steps>_steps.zip``.
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .config import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
+from ..config.hyperparam_files import ACTIVATIONS, NOISE_TYPES, OFF_POLICY_ALGOS
 
 if TYPE_CHECKING:
     from .recipes import Recipe
@@ -97,7 +97,7 @@ def _activation_name(act: str) -> str:
 
 def torch_policy_kwargs(pk: dict | None) -> dict:
     """A recipe's ``policy_kwargs`` for a torch policy: ``activation_fn`` named (``"tanh"``,
-    :data:`agents.config.ACTIVATIONS`) becomes the ``torch.nn`` class (``nn.Tanh``)."""
+    :data:`agents.config.hyperparam_files.ACTIVATIONS`) becomes the ``torch.nn`` class (``nn.Tanh``)."""
     import torch.nn as nn
 
     pk = dict(pk or {})
@@ -136,8 +136,8 @@ def _episode_length(venv, default: int = 1000) -> int:
 
 
 def make_action_noise(noise_type: str, sigma: float, venv, seed: int | None = None):
-    """The exploration noise ``noise_type`` of :data:`agents.config.NOISE_TYPES` (added to the actions of
-    TD3 / SAC / CrossQ, in the agent's action units), one independent process per environment copy of ``venv``.
+    """The exploration noise ``noise_type`` of :data:`agents.config.hyperparam_files.NOISE_TYPES` (added to the actions
+    of TD3 / SAC / CrossQ, in the agent's action units), one independent process per environment copy of ``venv``.
 
     - ``normal``: white Gaussian noise ``N(0, sigma^2)`` per step (SB3's ``NormalActionNoise``);
     - ``ornstein-uhlenbeck``: SB3's ``OrnsteinUhlenbeckActionNoise`` (``theta = 0.15``, ``dt = 0.01``:
@@ -264,9 +264,9 @@ class AlgoBackend:
         return self.load_class().load(path, device=device, **kwargs)
 
     def rebuilt_objects(self, recipe: Recipe, venv=None) -> dict:
-        """The attributes of a saved model that JSON cannot hold, rebuilt from ``recipe`` (its run's
-        ``config.json``) instead of unpickled from ``model.zip`` (:func:`agents.run_pickles.model_custom_objects`):
-        the policy class of ``recipe.policy``, ``policy_kwargs``, the schedules, the recipe's buffer classes and
+        """The attributes of a saved model that JSON cannot hold, rebuilt from ``recipe`` (its run's ``config.json``)
+        instead of unpickled from ``model.zip`` (:func:`agents.training.run_pickles.model_custom_objects`): the policy
+        class of ``recipe.policy``, ``policy_kwargs``, the schedules, the recipe's buffer classes and
         action noise (on ``venv``; None without one: evaluation draws no noise). ``lr_schedule`` is None: SB3
         derives it from ``learning_rate`` when the model is set up."""
         kw = self.constructor_kwargs(recipe, venv)
@@ -284,8 +284,9 @@ class AlgoBackend:
 
     def load_run_model(self, path: str, recipe: Recipe, *, venv=None, device: str = "cpu", **kwargs):
         """The model saved in ``path`` by a run of ``recipe``, nothing unpickled but plain data
-        (:func:`agents.run_pickles.model_custom_objects`; raises :class:`agents.run_pickles.PickleRefused` for a
-        payload it does not rebuild); ``venv``, ``kwargs`` as for :meth:`load`."""
+        (:func:`agents.training.run_pickles.model_custom_objects`; raises
+        :class:`agents.training.run_pickles.PickleRefused` for a payload it does not rebuild); ``venv``, ``kwargs`` as
+        for :meth:`load`."""
         from .run_pickles import graft_sbx, model_custom_objects, sbx_payloads
 
         custom = model_custom_objects(path, self.rebuilt_objects(recipe, venv), library=self.library)
@@ -321,7 +322,7 @@ def _sbx(name: str, cls: str) -> AlgoBackend:
                        extra="jax")
 
 
-#: the implementations of each algorithm name (the names of :data:`agents.config.ALGOS`), preferred
+#: the implementations of each algorithm name (the names of :data:`agents.config.hyperparam_files.ALGOS`), preferred
 #: first. SBX first for the off-policy algorithms: measured side by side on tracking
 #: (benchmarks/offpolicy_throughput.py; figures in the README and the recipe files).
 BACKENDS: dict[str, tuple[AlgoBackend, ...]] = {

@@ -1,4 +1,4 @@
-"""The benchmark's work units, run by an execution backend (:mod:`agents.bench_exec`) in a worker:
+"""The benchmark's work units, run by an execution backend (:mod:`agents.benchmark.backends`) in a worker:
 train and evaluate one (env, agent, seed) run (:func:`train_and_evaluate`), evaluate a kept model
 again on other episodes (:func:`reevaluate`), evaluate the analytic controllers of one env
 (:func:`analytic_results`) and, for an env with faults, the paper's controller on its fault-free counterpart
@@ -7,7 +7,7 @@ again on other episodes (:func:`reevaluate`), evaluate the analytic controllers 
 A worker needs no file system shared with the driver: it trains in a scratch directory of its own
 machine (``scratch``: the directory to make it in, ``None`` for the system's temporary directory),
 removes it, and returns the run *record* ``{"result": dict, "files": {name: bytes},
-"reevaluated": bool}``; the driver writes it (:func:`agents.bench_store.write_record`). What a run
+"reevaluated": bool}``; the driver writes it (:func:`agents.benchmark.store.write_record`). What a run
 computes does not depend on where it runs: the same spec gives the same record on every backend.
 """
 from __future__ import annotations
@@ -20,10 +20,10 @@ import time
 
 import numpy as np
 
-from .bench_plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
-from .bench_store import RECORD_FILES, read_run_files
-from .config import FAULT_FREE, gym_factory, parallel_factory
-from .evaluate import evaluate_policy
+from ..config.envs import FAULT_FREE, gym_factory, parallel_factory
+from ..evaluate import evaluate_policy
+from .plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
+from .store import RECORD_FILES, read_run_files
 
 __all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
            "mean_trajectory", "executed_on"]
@@ -59,7 +59,7 @@ def executed_on() -> dict:
 
 def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
     """Evaluate the model in ``run_dir`` on the spec's episodes: the run's ``result.json`` document."""
-    from .loading import load_agent
+    from ..training.loading import load_agent
 
     a = agent_spec(spec["agent"])
     agent = load_agent(run_dir)
@@ -73,10 +73,10 @@ def _evaluate(spec: dict, run_dir: str, train_s: float, curve: list) -> dict:
 
 
 def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
-    """Train one (env, agent, seed) run as ``spec`` asks (:func:`agents.bench_plan.plan_runs`), in a
+    """Train one (env, agent, seed) run as ``spec`` asks (:func:`agents.benchmark.plan.plan_runs`), in a
     scratch directory, and evaluate it: the run's record with its files (:data:`RECORD_FILES`)."""
-    from .curves import make_curve_callback
-    from .train import set_threads, train
+    from ..training.curves import make_curve_callback
+    from ..training.train import set_threads, train
 
     set_threads(spec["threads"])
     a = agent_spec(spec["agent"])
@@ -97,7 +97,7 @@ def reevaluate(spec: dict, files: dict, previous: dict, scratch: str | None = No
     """Evaluate a kept model (``files``: its ``config.json``, ``model.zip`` and ``vecnormalize.pkl`` as
     bytes) on the episodes of ``spec``; ``previous``: its stored result (training time and learning
     curve are kept). The record holds no files: the run's own stay as they are."""
-    from .train import set_threads
+    from ..training.train import set_threads
 
     set_threads(spec["threads"])
     with tempfile.TemporaryDirectory(prefix="run-", dir=scratch) as path:
@@ -133,9 +133,9 @@ def analytic_results(env: str, env_kwargs: dict, eval_seed: int, episodes: int) 
 
 
 def fault_free_paper(env: str, env_kwargs: dict, eval_seed: int, episodes: int) -> dict:
-    """The paper's controller on the fault-free counterpart of ``env`` (:data:`agents.config.FAULT_FREE`: the
+    """The paper's controller on the fault-free counterpart of ``env`` (:data:`agents.config.envs.FAULT_FREE`: the
     same task with ``faults=None``) on the episodes ``eval_seed + k``: its evaluation payload, the reference
-    ``J_paper,fault-free`` of the degradation columns (:mod:`agents.bench_report`). The same seed gives the
+    ``J_paper,fault-free`` of the degradation columns (:mod:`agents.benchmark.report`). The same seed gives the
     same episode in both environments (initial state, reference; the faulted environment draws its fault
     seed last from the copy's generator), which the report checks on the recorded ``x(0)``."""
     from baselines.policies import SeparationPolicy

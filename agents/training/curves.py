@@ -6,7 +6,7 @@ task's own environment (not the training env: a recipe's training-only options d
 apply) over ``len(seeds)`` seeded episodes and records ``J_policy / J_paper`` per
 episode, the paper controller's cost on the same seeds being computed once.
 The benchmark aggregates the curves over training runs (at each point a run's score is the mean
-of its cost ratios; IQM and a CI resampling whole runs, :mod:`agents.stats`).
+of its cost ratios; IQM and a CI resampling whole runs, :mod:`agents.benchmark.stats`).
 """
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ def paper_costs(env_name: str, env_kwargs: dict, seeds, *, parallel: bool = True
     """The paper controller's episode cost ``J = -return`` on each of ``seeds``."""
     from baselines.policies import SeparationPolicy
 
-    from .config import parallel_factory
-    from .evaluate import run_episode
+    from ..config.envs import parallel_factory
+    from ..evaluate import run_episode
 
     env = parallel_factory(env_name, env_kwargs)()
     pol = SeparationPolicy(env)
@@ -43,8 +43,8 @@ def make_curve_callback(env_name: str, env_kwargs: dict, seeds, every: int, *, n
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from .config import gym_factory, parallel_factory
-    from .evaluate import run_episode
+    from ..config.envs import gym_factory, parallel_factory
+    from ..evaluate import run_episode
     from .loading import TrainedAgent
 
     seeds = [int(s) for s in seeds]
@@ -72,7 +72,7 @@ def make_curve_callback(env_name: str, env_kwargs: dict, seeds, every: int, *, n
         def evaluate(self) -> None:
             cfg = self.agent_config
             if cfg is None:
-                raise RuntimeError("EvalCurveCallback needs agent_config (set by agents.train.train)")
+                raise RuntimeError("EvalCurveCallback needs agent_config (set by agents.training.train.train)")
             venv = self.model.get_env()
             vn = venv if isinstance(venv, VecNormalize) else None
             agent = TrainedAgent.from_model(self.model, vn, cfg)

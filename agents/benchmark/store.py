@@ -1,7 +1,7 @@
 """The benchmark's ``--out`` directory: what it may hold (:func:`foreign_entries`, :func:`claim_out_dir`)
 and the run records the driver writes there (:func:`write_record`) from what a worker returns.
 
-Workers never write into ``out`` (no file system shared with them is assumed, :mod:`agents.bench_exec`):
+Workers never write into ``out`` (no file system shared with them is assumed, :mod:`agents.benchmark.backends`):
 a worker trains in a scratch directory of its own machine and returns the run's files with its
 result; the driver writes them into ``<out>/models/<env>/<budget>/<agent>/s<seed>``, ``result.json``
 last and atomically, so a run counts as finished only once every file is in place.
@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 import os
 
-from .bench_plan import BUDGETS, is_agent_name
-from .config import ENVS
-from .runs import clear_run
+from ..config.envs import ENVS
+from ..training.runs import clear_run
+from .plan import BUDGETS, is_agent_name
 
 __all__ = ["MARKER", "OutDirError", "foreign_entries", "claim_out_dir", "RECORD_FILES", "write_record",
            "read_run_files"]
@@ -25,7 +25,7 @@ MARKER = ".dobs-envs-benchmark"
 #: files the benchmark writes at the top level of ``out`` and in ``out/<env>``
 _TOP_FILES = ("summary.json", "summary.png")
 _ENV_FILES = ("results.json", "results.md", "results.csv", "error_norms.png", "learning_curves.png")
-#: files a training run (``agents.train``) and the benchmark write in a run directory
+#: files a training run (``agents.training.train``) and the benchmark write in a run directory
 _RUN_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "result.json")
 
 
@@ -127,14 +127,14 @@ def claim_out_dir(out: str, *, overwrite: bool = False) -> None:
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, MARKER), "w") as fh:
         fh.write("written by `dobs-envs benchmark`: this directory holds its runs and results "
-                 "(agents.benchmark.foreign_entries)\n")
+                 "(agents.benchmark.store.foreign_entries)\n")
 
 
 # ---------------------------------------------------------------------- run records (written by the driver)
 #: the files of a trained run a worker returns (``result.json`` is the record's ``result``, written last);
 #: the benchmark trains without checkpoints, and a complete run keeps no replay buffer
 RECORD_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "curve.json")
-#: the files a kept model is evaluated again from (:func:`agents.loading.load_agent`)
+#: the files a kept model is evaluated again from (:func:`agents.training.loading.load_agent`)
 MODEL_FILES = ("config.json", "model.zip", "vecnormalize.pkl")
 
 

@@ -1,11 +1,11 @@
 """The VecEnv a training run steps: :func:`build_vec_env` (and :func:`core_of`, the batched core
 of a dobs_envs environment).
 
-The dobs_envs environments train on :class:`agents.core_vec_env.CoreVecEnv` (all copies in one
+The dobs_envs environments train on :class:`agents.vecenv.batched_core.CoreVecEnv` (all copies in one
 batched core, centralised or one slot per (copy, agent)); foreign Gymnasium ids, environment
-constructors and the residual environments of :mod:`agents.hybrid` on SB3's ``DummyVecEnv``
-(centralised) or :class:`agents.vec_env.ParallelVecEnv` (multi-agent). Normalisation
-(``VecNormalize``) is added by :func:`agents.train.train`, not here.
+constructors and the residual environments of :mod:`agents.training.hybrid` on SB3's ``DummyVecEnv``
+(centralised) or :class:`agents.vecenv.parallel.ParallelVecEnv` (multi-agent). Normalisation
+(``VecNormalize``) is added by :func:`agents.training.train.train`, not here.
 """
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ import numpy as np
 
 from dobs_envs.registry import get as registry_entry
 
-from .config import ENVS, env_key, gym_factory, parallel_factory
-from .core_vec_env import CoreVecEnv
-from .vec_env import ParallelVecEnv
+from ..config.envs import ENVS, env_key, gym_factory, parallel_factory
+from ..vecenv.batched_core import CoreVecEnv
+from ..vecenv.parallel import ParallelVecEnv
 
 __all__ = ["build_vec_env", "core_of"]
 
@@ -27,15 +27,15 @@ def build_vec_env(env, *, multi_agent: bool = False, n_envs: int = 1, seed: int 
                   residual_scale: float | None = None):
     """Monitored VecEnv for training (not normalised).
 
-    ``env`` is a name (see :mod:`agents.config`) or a constructor. The dobs_envs
-    environments (by name) run as one batched core, :class:`agents.core_vec_env.CoreVecEnv`
+    ``env`` is a name (see :mod:`agents.config.hyperparam_files`) or a constructor. The dobs_envs
+    environments (by name) run as one batched core, :class:`agents.vecenv.batched_core.CoreVecEnv`
     + ``VecMonitor``: centralised (one slot per copy, episodes of the Gymnasium id's
     ``max_episode_steps`` unless ``max_cycles``/``horizon`` are given) or parameter-shared
     (one slot per (copy, agent)). Foreign Gymnasium ids and residual envs use ``DummyVecEnv``
     + ``Monitor`` (centralised) or :class:`ParallelVecEnv` + ``VecMonitor`` (multi-agent).
     ``normalize_actions``: the agent acts in ``[-1, 1]`` (Gymnasium's ``RescaleAction`` / the
     adapters' ``rescale_actions``). ``residual_scale``: the agent's action is a residual
-    correction (:mod:`agents.hybrid`), already in ``[-1, 1]``.
+    correction (:mod:`agents.training.hybrid`), already in ``[-1, 1]``.
     """
     from .hybrid import residual_factory
 

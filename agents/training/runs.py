@@ -4,16 +4,16 @@ A run directory (``runs/<env>_<algo>[_ma]_s<seed>`` by default, :func:`default_r
 
 - ``config.json``: everything needed to rebuild the env and the policy inputs; ``status``
   (:data:`RUNNING` / :data:`INTERRUPTED` / :data:`COMPLETE`), ``timesteps_done``, and the
-  ``library`` / ``library_version`` that trained it (:mod:`agents.algos`; absent in runs
-  written before they were recorded, which were trained with :data:`agents.algos.LEGACY_LIBRARY`);
+  ``library`` / ``library_version`` that trained it (:mod:`agents.training.algos`; absent in runs
+  written before they were recorded, which were trained with :data:`agents.training.algos.LEGACY_LIBRARY`);
 - ``model.zip`` and ``vecnormalize.pkl`` (when observations or rewards are normalised);
 - ``replay_buffer.pkl`` (off-policy run interrupted by SIGINT, so that it resumes with its buffer);
 - ``checkpoints/<algo>_<sb3 steps>_steps.zip`` with its normaliser
   ``<algo>_vecnormalize_<sb3 steps>_steps.pkl``.
 
 :func:`read_run_config` and :func:`run_files` validate a run directory (or its ``model.zip``,
-or one checkpoint) for loading (:func:`agents.loading.load_agent`); :func:`resume_point` finds
-where :func:`agents.train.resume` continues an interrupted run. A damaged or incomplete run
+or one checkpoint) for loading (:func:`agents.training.loading.load_agent`); :func:`resume_point` finds
+where :func:`agents.training.train.resume` continues an interrupted run. A damaged or incomplete run
 directory raises :class:`RunDirError` (a ``ValueError``) with one line naming the file.
 """
 from __future__ import annotations
@@ -54,7 +54,7 @@ class RunDirError(ValueError):
 
 def clear_run(out: str) -> None:
     """Remove the files of a previous run in ``out`` (a new run replaces it: none of its models,
-    normalisers or checkpoints may be mistaken for the new run's, e.g. by :func:`agents.train.resume`)."""
+    normalisers or checkpoints may be mistaken for the new run's, e.g. by :func:`agents.training.train.resume`)."""
     for f in ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl"):
         if os.path.isfile(os.path.join(out, f)):
             os.remove(os.path.join(out, f))
@@ -83,7 +83,7 @@ def load_or_refuse(path: str, load: Callable):
     """``load()``, or a :class:`RunDirError` naming ``path`` when the file cannot be read (corrupt, truncated)."""
     try:
         return load()
-    except RunDirError:  # already one line naming the file (e.g. agents.run_pickles.PickleRefused)
+    except RunDirError:  # already one line naming the file (e.g. agents.training.run_pickles.PickleRefused)
         raise
     except Exception as exc:  # noqa: BLE001 -- a damaged zip/pickle fails anywhere in zipfile/torch/pickle
         raise RunDirError(f"{path} cannot be loaded (corrupt or truncated file? {type(exc).__name__}: "
@@ -122,9 +122,9 @@ def read_run_config(path: str, *, require_model: bool = True) -> dict:
     """``config.json`` of a run directory (or of the directory holding ``model.zip`` or the
     checkpoint ``path``), validated; with ``require_model``, the model file must exist too.
 
-    The run's ``algo`` must have a backend (:data:`agents.algos.BACKENDS`) implemented by the
-    ``library`` the run records (:data:`agents.algos.LEGACY_LIBRARY` when it records none); whether
-    that library is installed is checked when the model is loaded (:func:`agents.algos.backend_of`)."""
+    The run's ``algo`` must have a backend (:data:`agents.training.algos.BACKENDS`) implemented by the
+    ``library`` the run records (:data:`agents.training.algos.LEGACY_LIBRARY` when it records none); whether
+    that library is installed is checked when the model is loaded (:func:`agents.training.algos.backend_of`)."""
     run, ckpt = _run_dir_of(path)
     if not os.path.isdir(run):
         raise RunDirError(f"run directory {run!r} does not exist (expected the --out of a training run)")
@@ -155,7 +155,7 @@ def read_run_config(path: str, *, require_model: bool = True) -> dict:
 
 
 def run_files(path: str) -> RunFiles:
-    """The files :func:`agents.loading.load_agent` reads for ``path`` (a run directory, its ``model.zip``
+    """The files :func:`agents.training.loading.load_agent` reads for ``path`` (a run directory, its ``model.zip``
     or a checkpoint)."""
     cfg = read_run_config(path)
     run, ckpt = _run_dir_of(path)
@@ -196,7 +196,7 @@ def _complete_pickle(path: str) -> bool:
 
 
 def resume_point(path: str, cfg: dict | None = None) -> ResumePoint:
-    """Where :func:`agents.train.resume` continues the run in ``path``: the later of ``model.zip`` (saved
+    """Where :func:`agents.training.train.resume` continues the run in ``path``: the later of ``model.zip`` (saved
     on an interrupt; ``config.json`` ``model_sb3_timesteps``) and the last complete checkpoint (a valid
     zip, with its normaliser when the run normalises). Raises :class:`RunDirError` for a complete
     run or one with no save."""

@@ -2,9 +2,9 @@
 (:func:`plan_runs`) and what a stored run in ``<out>/models`` already answers
 (:func:`stored_answer`, :func:`pending_runs`, :func:`reevaluated_runs`, :func:`replaced_runs`).
 
-Nothing here trains or writes: the execution backends (:mod:`agents.bench_exec`) run the
-work units of :mod:`agents.bench_tasks`, the driver (:func:`agents.benchmark.run_benchmark`)
-writes the records they return (:mod:`agents.bench_store`).
+Nothing here trains or writes: the execution backends (:mod:`agents.benchmark.backends`) run the
+work units of :mod:`agents.benchmark.tasks`, the driver (:func:`agents.benchmark.driver.run_benchmark`)
+writes the records they return (:mod:`agents.benchmark.store`).
 """
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from .algos import LEGACY_LIBRARY, backend
-from .config import ENVS, TASKS
-from .seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
+from ..config.envs import ENVS, TASKS
+from ..training.algos import LEGACY_LIBRARY, backend
+from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
            "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
@@ -120,7 +120,8 @@ ANALYTIC_INFO = {"paper (separation)": "own observer's estimate",
                  "decentralised (no comm.)": "own measurement, no comm.", "zero input": "none"}
 ANALYTIC = tuple(ANALYTIC_INFO)
 PAPER = ANALYTIC[0]
-CURVE_SEED = TUNING.start  # learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/seeds.py)
+#: learning-curve episodes use seeds CURVE_SEED + k (the tuning range, agents/training/seeds.py)
+CURVE_SEED = TUNING.start
 
 
 # ---------------------------------------------------------------------- what a stored run answers
@@ -140,7 +141,7 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
     affected runs instead of reusing results of the old recipe. None otherwise.
 
     ``library``: the run must also have been trained by this implementation (``config.json``
-    ``library``; :data:`agents.algos.LEGACY_LIBRARY` for runs that record none), so that installing
+    ``library``; :data:`agents.training.algos.LEGACY_LIBRARY` for runs that record none), so that installing
     or removing the ``jax`` extra (SBX instead of SB3) never passes one library's result off as another's.
 
     ``training_only``: compare only the signature's :data:`TRAINING_KEYS` (the run was trained as
@@ -168,7 +169,7 @@ def _finished_run(path: str, sig: dict, hyperparams: dict, *, training_only: boo
 def _training_overrides(spec: dict) -> dict:
     """The budget's hyperparameter overrides of a run plus its agent's training-only env options; a
     recipe-file agent's: its file's section with the budget's overrides over it (as over the shipped recipe)."""
-    from .recipes import merge_overrides
+    from ..training.recipes import merge_overrides
 
     a = agent_spec(spec["agent"])
     hp = merge_overrides(spec.get("recipe"), spec["hp"])
@@ -180,7 +181,7 @@ def _training_overrides(spec: dict) -> dict:
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     """The finished result of ``spec``'s run if it can be reused with today's recipe, else None
     (``training_only``: see :func:`_finished_run`)."""
-    from .recipes import resolve_recipe
+    from ..training.recipes import resolve_recipe
 
     a = agent_spec(spec["agent"])
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
@@ -298,8 +299,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
     written). With :func:`pending_runs` it tells which of them a stored result already answers.
 
-    ``env``: a registered name (:data:`agents.config.ENVS`) or ``"all"``: the fault-free tasks
-    (:data:`agents.config.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
+    ``env``: a registered name (:data:`agents.config.envs.ENVS`) or ``"all"``: the fault-free tasks
+    (:data:`agents.config.envs.TASKS`; an environment with faults on by default, ``tracking_lossy``, is one of
     them again under faults and is run by its name).
 
     ``seeds``: the number of training runs of every agent (``seed, seed + 1, ...``; default the
@@ -309,16 +310,16 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
 
     ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
     Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
-    budget's steps, but with the file's section for the env (:func:`agents.recipes.recipe_file_section`:
+    budget's steps, but with the file's section for the env (:func:`agents.training.recipes.recipe_file_section`:
     the Gymnasium id's, else ``default``; the budget's overrides apply over it as over the shipped
     recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
     ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
-    :class:`agents.config.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has no
-    section for an env."""
+    :class:`agents.config.hyperparam_files.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has
+    no section for an env."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
-    env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.TASKS)
+    env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.envs.TASKS)
     for e in env_names:
         if e not in ENVS:
             raise ValueError(f"unknown env {e!r}; choose from {sorted(ENVS)} or 'all'")
@@ -331,12 +332,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    # the three seed ranges (agents/seeds.py): training seeds, evaluation episodes, tuning episodes
+    # the three seed ranges (agents/training/seeds.py): training seeds, evaluation episodes, tuning episodes
     check_training_seeds(seed, max([n_seeds, *counts.values()]), name="seed")
     eval_seeds = check_episode_seeds(eval_seed, episodes, EVALUATION, name="eval_seed")
     curve_seeds = check_episode_seeds(CURVE_SEED, B["curve_episodes"], TUNING, name="learning-curve seed")
     env_kwargs = dict(B["env_kwargs"])
-    from .recipes import merge_overrides, recipe_file_section
+    from ..training.recipes import merge_overrides, recipe_file_section
 
     # the files' sections, read and validated once per env (nothing named in a file is imported)
     sections = {(k, e): recipe_file_section(f, e) for k, f in recipes.items() for e in env_names}
@@ -365,12 +366,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
 
 
 def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:
-    """:class:`agents.config.HyperparamsError` naming the keys of the recipe file ``path`` that ``agent``'s
-    algorithm class does not take, before anything trains (every run would fail the same way)."""
+    """:class:`agents.config.hyperparam_files.HyperparamsError` naming the keys of the recipe file ``path`` that
+    ``agent``'s algorithm class does not take, before anything trains (every run would fail the same way)."""
     import inspect
 
-    from .config import HyperparamsError
-    from .recipes import resolve_recipe
+    from ..config.hyperparam_files import HyperparamsError
+    from ..training.recipes import resolve_recipe
 
     a = AGENTS[agent]
     recipe = resolve_recipe(a.algo, env, multi_agent=a.multi_agent, hybrid=a.hybrid, overrides=overrides)
