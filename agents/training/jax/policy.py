@@ -12,7 +12,8 @@ and critic networks of those widths), ``activation_fn``, ``ortho_init=True`` and
 
 Parameters are a dict of plain arrays: ``pi_w{i}``, ``pi_b{i}``, ``vf_w{i}``, ``vf_b{i}`` (``i = 0..k``,
 the last the output layer; ``w`` of shape ``(in, out)``) and ``log_std``. The same names are the arrays
-of the exported ``.npz`` (:mod:`agents.training.jax.export`).
+of the exported ``.npz`` (:mod:`agents.training.jax.export`); the numpy twin of the actor is
+:func:`agents.training.jax.numpy_policy.numpy_actor_mean`.
 """
 from __future__ import annotations
 
@@ -20,15 +21,11 @@ import math
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-__all__ = ["ACTIVATIONS", "init_params", "actor_mean", "value", "log_prob", "entropy", "numpy_actor_mean"]
+__all__ = ["ACTIVATIONS", "init_params", "actor_mean", "value", "log_prob", "entropy"]
 
-#: activation names (the recipes' ``activation_fn``) -> (jax function, numpy function)
-ACTIVATIONS = {
-    "tanh": (jnp.tanh, np.tanh),
-    "relu": (jax.nn.relu, lambda x: np.maximum(x, 0.0)),
-}
+#: activation names (the recipes' ``activation_fn``) -> jax function (numpy twins: .numpy_policy)
+ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu}
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -59,12 +56,12 @@ def _mlp(params: dict, prefix: str, x, act):
 
 def actor_mean(params: dict, obs, activation: str = "tanh"):
     """The mean action ``mu(obs)``: ``obs (..., D) -> (..., m)``, float32."""
-    return _mlp(params, "pi", obs.astype(jnp.float32), ACTIVATIONS[activation][0])
+    return _mlp(params, "pi", obs.astype(jnp.float32), ACTIVATIONS[activation])
 
 
 def value(params: dict, obs, activation: str = "tanh"):
     """The critic ``V(obs)``: ``obs (..., D) -> (...)``, float32."""
-    return _mlp(params, "vf", obs.astype(jnp.float32), ACTIVATIONS[activation][0])[..., 0]
+    return _mlp(params, "vf", obs.astype(jnp.float32), ACTIVATIONS[activation])[..., 0]
 
 
 def log_prob(params: dict, mean, action):
@@ -77,15 +74,3 @@ def log_prob(params: dict, mean, action):
 def entropy(params: dict):
     """The Gaussian's entropy (state independent): ``sum_j (1/2 + log(2 pi)/2 + log_std_j)``."""
     return jnp.sum(0.5 + 0.5 * _LOG_2PI + params["log_std"])
-
-
-def numpy_actor_mean(arrays: dict, obs: np.ndarray, activation: str = "tanh") -> np.ndarray:
-    """:func:`actor_mean` in numpy float64 (the reference of the compiled actor, and the exported policy)."""
-    act = ACTIVATIONS[activation][1]
-    n = sum(1 for k in arrays if k.startswith("pi_w"))
-    x = np.asarray(obs, dtype=np.float64)
-    for i in range(n):
-        x = x @ np.asarray(arrays[f"pi_w{i}"], np.float64) + np.asarray(arrays[f"pi_b{i}"], np.float64)
-        if i < n - 1:
-            x = act(x)
-    return x

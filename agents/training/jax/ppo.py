@@ -203,7 +203,7 @@ def make_env(cfg: PPOConfig):
 
 def _clip_by_global_norm(grads, max_norm):
     """``clip_grad_norm_``: scale by ``min(1, max_norm / (||g|| + 1e-6))``."""
-    norm = optax.global_norm(grads)
+    norm = optax.tree.norm(grads)
     scale = jnp.minimum(1.0, max_norm / (norm + 1e-6))
     return jax.tree.map(lambda g: g * scale, grads)
 
