@@ -26,6 +26,17 @@ What it computes is stable-baselines3 2.x PPO with ``VecNormalize``, as the ship
   after the update's rollout (SB3's ``progress_remaining``; the runs take ``ceil(total / (n_envs
   n_steps))`` updates, so the last one may overshoot the budget, as SB3's does).
 
+Why not rejax 0.1.3's ``PPO`` (measured on tracking, same sizes, one core: the same CPU time per step
+within the noise of a shared machine): it cannot express the shipped recipe. Its Gaussian policy starts
+at ``log_std = 0`` (the recipe: -2; the recipes' comments record that a large initial std makes these
+plants leave the state bound), its learning rate is a constant (the recipe: ``lin_3e-4``), its
+``max_grad_norm`` clips each gradient element (``optax.clip``), not the global norm, its critic loss is
+always value-clipped, it treats truncation as termination (no bootstrap of the 400-step time limit), its
+normalisers clip neither observations nor rewards, and the actor and critic have separate optimisers
+and default (not orthogonal) initialisation. It also needs distrax (which pulls tfp-nightly) and
+gymnax 1.0 (``gymnasium < 1.4``: it conflicts with the main environment, so it cannot go into the
+``jax`` extra).
+
 The hyperparameters are the recipe's keys (the merged section of ``agents/hyperparams/ppo.yaml``, e.g.
 ``agents.recipes.resolve_recipe("ppo", "tracking").hyperparams``), read by :func:`ppo_config`.
 """
