@@ -72,9 +72,10 @@ def sb3_worker(steps: int, seed: int, out_json: str, run_dir: str) -> None:
         json.dump(record, fh)
 
 
-def run_jax(steps: int, seed: int, policy_dir: str) -> dict:
-    """The jitted PPO run: set-up, compile and run timed apart; its curve and figures; the trained policy
-    exported to ``policy_dir``."""
+def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1) -> dict:
+    """The jitted PPO run (``n_seeds > 1``: that many runs vmapped in one compiled call, keys
+    ``split(PRNGKey(seed), n_seeds)``): set-up, compile and run timed apart; the first run's curve and
+    policy (exported to ``policy_dir``)."""
     t0, w0 = time.process_time(), time.perf_counter()
     import jax
 
@@ -84,8 +85,11 @@ def run_jax(steps: int, seed: int, policy_dir: str) -> dict:
 
     cfg, hp = ppo_config(resolve_recipe("ppo", ENV).hyperparams, ENV_ID, total_timesteps=steps)
     env, env_params = make_env(cfg)
-    train = jax.jit(make_train(cfg, env, env_params))
+    train = make_train(cfg, env, env_params)
     key = jax.random.PRNGKey(seed)
+    if n_seeds > 1:
+        train, key = jax.vmap(train, in_axes=(0, None)), jax.random.split(key, n_seeds)
+    train = jax.jit(train)
     setup = (time.process_time() - t0, time.perf_counter() - w0)
     t0, w0 = time.process_time(), time.perf_counter()
     compiled = train.lower(key, hp).compile()
@@ -93,10 +97,13 @@ def run_jax(steps: int, seed: int, policy_dir: str) -> dict:
     t0, w0 = time.process_time(), time.perf_counter()
     out = jax.block_until_ready(compiled(key, hp))
     run = (time.process_time() - t0, time.perf_counter() - w0)
-    c = jax.device_get(out["curve"])
-    save_policy(policy_dir, jax.device_get(out), cfg, hp, env, env_params, extra={"seed": seed, "steps": steps})
+    out = jax.device_get(out)
+    if n_seeds > 1:
+        out = jax.tree.map(lambda a: a[0], out)
+    c = out["curve"]
+    save_policy(policy_dir, out, cfg, hp, env, env_params, extra={"seed": seed, "steps": steps, "n_seeds": n_seeds})
     return {"setup_cpu": setup[0], "setup_wall": setup[1], "compile_cpu": comp[0], "compile_wall": comp[1],
-            "run_cpu": run[0], "run_wall": run[1], "steps_done": cfg.steps_done, "rollout": cfg.n_envs * cfg.n_steps,
+            "run_cpu": run[0], "run_wall": run[1], "n_seeds": n_seeds, "run_cpu_per_run": run[0] / n_seeds, "steps_done": cfg.steps_done, "rollout": cfg.n_envs * cfg.n_steps,
             "curve": {"steps": c["steps"].tolist(), "episodes": c["episodes"].tolist(),
                       "return_sum": np.nan_to_num(c["episode_return"] * c["episodes"]).tolist()},
             "jax_version": jax.__version__, "dtype": cfg.dtype}
@@ -167,12 +174,16 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="write the JSON record here (e.g. results/bench_jax_train.json)")
     ap.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     ap.add_argument("--skip-sb3", action="store_true", help="time the jitted run only")
+    ap.add_argument("--jax-seeds", type=int, default=1,
+                    help="jitted runs vmapped in one call (their CPU time is shared; default 1)")
     ap.add_argument("--eval-episodes", type=int, default=20,
                     help="evaluation episodes (seeds 10000..) for J/J_paper of both policies; 0: none")
     ap.add_argument("--sb3-worker", nargs=2, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps must be a positive integer, got {args.steps}")
+    if args.jax_seeds < 1:
+        ap.error(f"--jax-seeds must be a positive integer, got {args.jax_seeds}")
     if args.eval_episodes < 0:
         ap.error(f"--eval-episodes must be >= 0, got {args.eval_episodes}")
     if args.sb3_worker:
@@ -186,11 +197,12 @@ def main(argv=None) -> int:
     record = {"steps": args.steps, "seed": args.seed, "env": ENV_ID, "cpu_count": os.cpu_count(),
               "PJRT_NPROC": os.environ.get("PJRT_NPROC"), "XLA_FLAGS": os.environ.get("XLA_FLAGS"),
               "load_before_jax": _load()}
-    jx = run_jax(args.steps, args.seed, policy_dir)
+    jx = run_jax(args.steps, args.seed, policy_dir, args.jax_seeds)
     record["load_after_jax"] = _load()
     record["jax"] = jx
-    print(f"jitted PPO, {jx['steps_done']} steps: set-up {jx['setup_cpu']:.1f} s CPU, compile {jx['compile_cpu']:.1f} s "
-          f"CPU ({jx['compile_wall']:.1f} s wall), run {jx['run_cpu']:.1f} s CPU ({jx['run_wall']:.1f} s wall)")
+    print(f"jitted PPO, {args.jax_seeds} x {jx['steps_done']} steps: set-up {jx['setup_cpu']:.1f} s CPU, compile {jx['compile_cpu']:.1f} s "
+          f"CPU ({jx['compile_wall']:.1f} s wall), run {jx['run_cpu']:.1f} s CPU ({jx['run_wall']:.1f} s wall; "
+          f"{jx['run_cpu_per_run']:.1f} s CPU per run)")
     n_bins, rollout = len(jx["curve"]["steps"]), jx["rollout"]
     j_count, j_sum = np.asarray(jx["curve"]["episodes"]), np.asarray(jx["curve"]["return_sum"])
     tail = slice(max(0, n_bins - TAIL_ROLLOUTS), n_bins)
@@ -204,11 +216,13 @@ def main(argv=None) -> int:
         record["sb3_curve"] = {"episodes": s_count.tolist(), "return_sum": s_sum.tolist()}
         record["sb3_final_return"] = float(s_sum[tail].sum() / max(s_count[tail].sum(), 1))
         record["ratio_run_cpu"] = jx["run_cpu"] / sb["cpu"]
+        record["ratio_run_cpu_per_run"] = jx["run_cpu_per_run"] / sb["cpu"]
         record["ratio_compile_and_run_cpu"] = (jx["compile_cpu"] + jx["run_cpu"]) / sb["cpu"]
         record["ratio_run_wall"] = jx["run_wall"] / sb["wall"]
         print(f"SB3 PPO, {sb['timesteps_done']} steps: {sb['cpu']:.1f} s CPU, {sb['wall']:.1f} s wall "
               f"(learn {sb['train_seconds']:.1f} s wall)")
-        print(f"ratio jitted / SB3 (CPU): run {record['ratio_run_cpu']:.3f}, compile + run "
+        print(f"ratio jitted / SB3 (CPU): run {record['ratio_run_cpu']:.3f} (per run "
+              f"{record['ratio_run_cpu_per_run']:.3f}), compile + run "
               f"{record['ratio_compile_and_run_cpu']:.3f}; wall: run {record['ratio_run_wall']:.3f}")
         print("mean training episode return per tenth of the run (JAX | SB3):")
         for part in np.array_split(np.arange(n_bins), min(10, n_bins)):
