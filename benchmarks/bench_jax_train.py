@@ -1,9 +1,9 @@
 """Issue 40's first target: a 600k-step jitted PPO run on tracking beside SB3 PPO's, one core each.
 
 Both train PPO with the shipped tracking recipe (``agents/hyperparams/ppo.yaml``, read through
-``agents.recipes.resolve_recipe``): the jitted trainer (``agents.training.jax``, one compiled function
+``agents.training.recipes.resolve_recipe``): the jitted trainer (``agents.training.jax``, one compiled function
 on ``dobs_envs.jax``, float32) in this process, then SB3 PPO through the project's SB3 training entry
-(``agents.train.train``, what ``dobs-envs train --algo ppo --env tracking`` calls, torch on one thread)
+(``agents.training.train.train``, what ``dobs-envs train --algo ppo --env tracking`` calls, torch on one thread)
 in a child process of this script. One core each: XLA on one thread (``PJRT_NPROC=1``,
 ``--xla_cpu_multi_thread_eigen=false``, set before JAX is imported), torch ``set_num_threads(1)``; the
 runs are sequential.
@@ -48,11 +48,11 @@ def _load() -> list:
 
 
 def sb3_worker(steps: int, seed: int, out_json: str, run_dir: str) -> None:
-    """Child process: SB3 PPO through agents.train.train, recording every training episode's return."""
+    """Child process: SB3 PPO through agents.training.train.train, recording every training episode's return."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agents.train import train
+    from agents.training.train import train
 
     torch.set_num_threads(1)
     episodes = []
@@ -79,7 +79,7 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1) -> dict:
     t0, w0 = time.process_time(), time.perf_counter()
     import jax
 
-    from agents.recipes import resolve_recipe
+    from agents.training.recipes import resolve_recipe
     from agents.training.jax.export import save_policy
     from agents.training.jax.ppo import make_env, make_train, ppo_config
 
@@ -131,15 +131,15 @@ def run_sb3(steps: int, seed: int, run_dir: str) -> dict:
 def evaluate(policy_dir: str, run_dir: str | None, episodes: int) -> dict:
     """J / J_paper of both trained policies on the benchmark's evaluation episodes (seeds 10000..), with
     the existing harness: :func:`agents.evaluate.evaluate_policy` on the task's own environment
-    (``agents.config.gym_factory``, as ``dobs-envs evaluate``: no training-only options), the SB3 agent
-    through ``agents.loading.load_agent(...).policy_for`` (``evaluate_model``'s path), and the paper
-    controller's costs on the same seeds (:func:`agents.curves.paper_costs`). A run's score is the mean of
+    (``agents.config.envs.gym_factory``, as ``dobs-envs evaluate``: no training-only options), the SB3 agent
+    through ``agents.training.loading.load_agent(...).policy_for`` (``evaluate_model``'s path), and the paper
+    controller's costs on the same seeds (:func:`agents.training.curves.paper_costs`). A run's score is the mean of
     its per-episode ratios (the benchmark's)."""
-    from agents.config import gym_factory
-    from agents.curves import paper_costs
+    from agents.config.envs import gym_factory
+    from agents.training.curves import paper_costs
     from agents.evaluate import evaluate_policy
-    from agents.loading import load_agent
-    from agents.seeds import EVALUATION
+    from agents.training.loading import load_agent
+    from agents.training.seeds import EVALUATION
     from agents.training.jax.numpy_policy import NumpyPolicy
 
     first = EVALUATION.start

@@ -38,7 +38,7 @@ gymnax 1.0 (``gymnasium < 1.4``: it conflicts with the main environment, so it c
 ``jax`` extra).
 
 The hyperparameters are the recipe's keys (the merged section of ``agents/hyperparams/ppo.yaml``, e.g.
-``agents.recipes.resolve_recipe("ppo", "tracking").hyperparams``), read by :func:`ppo_config`.
+``agents.training.recipes.resolve_recipe("ppo", "tracking").hyperparams``), read by :func:`ppo_config`.
 """
 from __future__ import annotations
 
