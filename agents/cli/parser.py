@@ -59,8 +59,8 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("evaluate", help="evaluate a trained run directory on seeded episodes")
     p.add_argument("--model", required=True,
-                   help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip; a "
-                        "jitted run's directory: its policy.npz)")
+                   help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip), or "
+                        "the directory of a jitted run (train --trainer jax: its policy.npz + policy.json)")
     p.add_argument("--episodes", type=_positive_int, default=10)
     p.add_argument("--seed", type=_seed, default=TUNING.start,
                    help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "
