@@ -158,10 +158,10 @@ def _train_jax(args) -> int:
         _usage_error(f"--trainer jax implements --algo {' | '.join(ALGOS)}, not {args.algo} (use --trainer sb3 for "
                      f"{args.algo})")
     env = _new_run_env(args)
-    from ..training.jax.run import JaxRunError, jax_env_id, train_jax
+    from ..training.jax.run import JaxRunError, jax_env, train_jax
 
     try:
-        jax_env_id(env)
+        env = jax_env(env)[0]
     except JaxRunError as exc:
         _usage_error(str(exc))
     out = args.out or default_run_dir(env, f"{args.algo}_jax", False, args.seed)

@@ -37,7 +37,7 @@ from ..seeds import TUNING
 from ..train import TrainResult, xla_threads
 from . import ALGOS, LIBRARY, TRAINER
 
-__all__ = ["train_jax", "JaxRunError", "jax_env_id", "curve_updates", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
+__all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
 
 #: learning-curve episodes use seeds ``CURVE_SEED + k`` (the tuning range, as the benchmark's curves)
 CURVE_SEED = TUNING.start
@@ -59,19 +59,19 @@ def _version(name: str) -> str | None:
         return None
 
 
-def jax_env_id(env: str) -> str:
-    """The Gymnasium id of ``env`` (a name of :data:`agents.config.envs.ENVS` or an id) if the JAX environments
-    have it (:func:`dobs_envs.jax.registered_envs`), else ``ValueError`` listing the names they have."""
-    from dobs_envs.registry import GYM_IDS  # what dobs_envs.jax.registered_envs() returns, without importing JAX
+def jax_env(env: str) -> tuple[str, str]:
+    """``(name, Gymnasium id)`` of ``env`` (a name of :data:`agents.config.envs.ENVS` or a Gymnasium id) if the JAX
+    environments have it (:func:`dobs_envs.jax.registered_envs`), else :class:`JaxRunError` listing their names."""
+    from dobs_envs.registry import ENVIRONMENTS  # registered_envs() are their ids; read here without importing JAX
 
-    from ...config.envs import ENVS, env_key, gym_id
+    from ...config.envs import env_key, gym_id
 
     gid = gym_id(env_key(env))
-    ids = tuple(GYM_IDS)
-    if gid not in ids:
-        names = [k for k in ENVS if gym_id(k) in ids]
-        raise JaxRunError(f"--env {env!r}: the jitted trainer runs the JAX environments ({', '.join(names)})")
-    return gid
+    names = [e.name for e in ENVIRONMENTS.values() if e.gym_id == gid]
+    if not names:
+        raise JaxRunError(f"--env {env!r}: the jitted trainer runs the JAX environments "
+                          f"({', '.join(ENVIRONMENTS)})")
+    return names[0], gid
 
 
 def curve_updates(n_updates: int, points: int = CURVE_POINTS) -> list[int]:
@@ -119,11 +119,14 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
 
     Parameters
     ----------
-    env : a name of the JAX environments (:func:`jax_env_id`).
+    env : a name of the JAX environments or its Gymnasium id (:func:`jax_env`; the run records the name).
     timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole rollouts of
         ``n_envs * n_steps`` steps (``timesteps_done >= timesteps``, as SB3).
     hyperparams : overrides merged over the recipe (``agents/config/hyperparams/ppo.yaml``).
     threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
+
+    An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
+    generator: ``jax_enable_x64`` is switched on for the process (the run stays float32).
     progress : one line on stderr per phase (compile, run, curve).
 
     Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
@@ -134,7 +137,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
 
     if algo not in ALGOS:
         raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
-    gid = jax_env_id(env)
+    env, gid = jax_env(env)
     xla_threads(threads)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     import jax
@@ -147,6 +150,12 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         if progress:
             print(f"[jax ppo {env}] {msg}", file=sys.stderr, flush=True)
 
+    from dobs_envs.registry import ENVIRONMENTS
+
+    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
+        # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
+        # (docs/jax.md); the run still simulates and trains in float32 (ppo_config's dtype)
+        jax.config.update("jax_enable_x64", True)
     recipe = resolve_recipe(algo, env, overrides=hyperparams)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
