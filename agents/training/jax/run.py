@@ -112,7 +112,7 @@ def _curve(snapshots: dict, updates: list, rollout: int, cfg, hp, env, env_param
 
 def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed: int = 0, out: str,
               hyperparams: dict | None = None, threads: int | None = 1, progress: bool = True,
-              curve_points: int = CURVE_POINTS, curve_episodes: int = CURVE_EPISODES) -> TrainResult:
+              curve_points: int = CURVE_POINTS, curve_seeds=None) -> TrainResult:
     """Train ``algo`` with the jitted trainer on the JAX form of ``env`` and write the run directory ``out``
     (see the module doc; files of a previous run in ``out`` are replaced, other files kept: the caller decides
     whether ``out`` may be written).
@@ -128,6 +128,8 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
     generator: ``jax_enable_x64`` is switched on for the process (the run stays float32).
     progress : one line on stderr per phase (compile, run, curve).
+    curve_points, curve_seeds : the learning curve's points after the initial one (:func:`curve_updates`) and its
+        episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).
 
     Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
     trainer does not implement (:func:`.ppo.ppo_config` names the key);
@@ -137,6 +139,11 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
 
     if algo not in ALGOS:
         raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
+    seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
+    if not seeds or not all(s in TUNING for s in seeds):
+        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {seeds}")
+    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
+        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
     env, gid = jax_env(env)
     xla_threads(threads)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
@@ -175,7 +182,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         "n_updates": cfg.n_updates, "rollout": cfg.n_envs * cfg.n_steps, "n_agents": 1,
         "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
         "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams),
-        "policy": "policy.npz", "curve_seeds": [CURVE_SEED, CURVE_SEED + int(curve_episodes) - 1],
+        "policy": "policy.npz", "curve_seeds": seeds,
         "status": RUNNING,
     }
     os.makedirs(out, exist_ok=True)
@@ -190,12 +197,11 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     w0, c0 = time.perf_counter(), time.process_time()
     result = jax.device_get(jax.block_until_ready(compiled(key, hp)))
     train_s, train_cpu = time.perf_counter() - w0, time.process_time() - c0
-    say(f"trained in {train_s:.1f} s; learning curve: {len(updates)} points x {curve_episodes} episodes ...")
+    say(f"trained in {train_s:.1f} s; learning curve: {len(updates)} points x {len(seeds)} episodes ...")
 
     save_policy(out, result, cfg, hp, env_jax, env_params, overwrite=True,
                 extra={"seed": int(seed), "timesteps": timesteps, "timesteps_done": cfg.steps_done})
     w0 = time.perf_counter()
-    seeds = list(range(CURVE_SEED, CURVE_SEED + int(curve_episodes)))
     curve = _curve(result["snapshots"], updates, cfg.n_envs * cfg.n_steps, cfg, hp, env_jax, env_params, env, seeds)
     write_json_atomic(os.path.join(out, "curve.json"), curve)
     c = result["curve"]
