@@ -135,3 +135,24 @@ def test_existing_out_is_not_overwritten(jax_run, tmp_path, capsys):
     (other / "mine.txt").write_text("x")
     assert "holds no run" in _exit2(base[:-1] + [str(other)], capsys)
     assert os.listdir(other) == ["mine.txt"]
+
+
+@pytest.mark.parametrize("damage", ["truncated", "pickled_array", "other_env"])
+def test_evaluate_refuses_a_damaged_jitted_run(damage, jax_run, tmp_path, capsys):
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(jax_run, bad)
+    if damage == "truncated":
+        data = (bad / "policy.npz").read_bytes()
+        (bad / "policy.npz").write_bytes(data[:len(data) // 2])
+    elif damage == "pickled_array":  # an object array needs unpickling: refused, never loaded
+        with np.load(bad / "policy.npz") as z:
+            arrays = dict(z)
+        arrays["pi_w0"] = np.array([object()], dtype=object)
+        np.savez(bad / "policy.npz", **arrays)
+    else:
+        meta = json.load(open(bad / "policy.json"))
+        json.dump(dict(meta, env_id="dobs_envs/HeteroMAS-v0"), open(bad / "policy.json", "w"))
+    err = _exit2(["evaluate", "--model", str(bad), "--episodes", "1"], capsys)
+    assert "policy" in err, err

@@ -162,10 +162,8 @@ class JaxTrainedAgent:
 
         self.path, self.config, self.algo = path, config, config["algo"]
         self.model_path = os.path.join(path, "policy.npz")
-        try:
-            self.policy = NumpyPolicy(path)
-        except (OSError, ValueError, KeyError) as exc:
-            raise RunDirError(f"{path!r}: its exported policy cannot be loaded ({exc})") from None
+        # arrays read with allow_pickle=False; a damaged or refused file is a RunDirError naming it
+        self.policy = load_or_refuse(self.model_path, lambda: NumpyPolicy(path))
         if self.policy.meta.get("env_id") != config.get("env_id"):
             raise RunDirError(f"{path!r}: policy.json's env_id {self.policy.meta.get('env_id')!r} is not the run's "
                               f"{config.get('env_id')!r} (config.json)")
