@@ -40,7 +40,8 @@ def add_parser(sub) -> None:
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
                    help="env steps between checkpoints (0: none)")
-    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs)")
+    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs); 1 also runs XLA on one thread "
+                        "(SBX, --trainer jax), more leaves XLA its default pool")
     p.add_argument("--hyperparams", type=_json_object, default=None,
                    help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
     p.add_argument("--recipe", default=None, metavar="FILE",
