@@ -24,9 +24,9 @@ CPU times are this process's (``time.process_time``), wall times ``time.perf_cou
 """
 from __future__ import annotations
 
-import json
 import math
 import os
+import sys
 import time
 from importlib import metadata
 
@@ -124,9 +124,6 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         ``n_envs * n_steps`` steps (``timesteps_done >= timesteps``, as SB3).
     hyperparams : overrides merged over the recipe (``agents/config/hyperparams/ppo.yaml``).
     threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
-
-    An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
-    generator: ``jax_enable_x64`` is switched on for the process (the run stays float32).
     progress : one line on stderr per phase (compile, run, curve).
     curve_points, curve_seeds : the learning curve's points after the initial one (:func:`curve_updates`) and its
         episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).
@@ -134,9 +131,10 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
     trainer does not implement (:func:`.ppo.ppo_config` names the key);
     :class:`agents.config.hyperparam_files.HyperparamsError` from the recipe files.
-    """
-    import sys
 
+    An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
+    generator: ``jax_enable_x64`` is switched on for the process (the run stays float32).
+    """
     if algo not in ALGOS:
         raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
     seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
@@ -149,6 +147,8 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     import jax
 
+    from dobs_envs.registry import ENVIRONMENTS
+
     from ..recipes import resolve_recipe
     from .export import save_policy
     from .ppo import make_env, make_train, ppo_config
@@ -156,8 +156,6 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     def say(msg: str) -> None:
         if progress:
             print(f"[jax ppo {env}] {msg}", file=sys.stderr, flush=True)
-
-    from dobs_envs.registry import ENVIRONMENTS
 
     if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
         # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
