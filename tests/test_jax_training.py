@@ -173,3 +173,28 @@ def test_numpy_export_matches_jax_and_acts_in_gymnasium(tiny, tmp_path):
 def test_config_errors_name_the_key(change, message):
     with pytest.raises(ValueError, match=message):
         ppo_config({**TINY, **change}, ENV_ID, total_timesteps=256)
+
+
+def test_snapshots_keep_the_initial_and_final_actor(tiny):
+    """make_train(snapshots=...): update count 0 is the initialisation (init_params of the run's first key),
+    the last the run's final actor and statistics (bitwise: the same values written into the buffer); the
+    run with snapshots is the vmapped run without them (float32 round-off between batched and single code)."""
+    from agents.training.jax import policy as pol
+
+    cfg, hp, env, env_params, out_a, _ = tiny
+    with pytest.raises(ValueError, match=r"update counts in 0\.\.2"):
+        make_train(cfg, env, env_params, snapshots=[0, 3])
+    key = jax.random.split(jax.random.PRNGKey(0), 3)[0]
+    out = jax.device_get(jax.jit(make_train(cfg, env, env_params, snapshots=[2, 0, 1]))(key, hp))
+    snap = out["snapshots"]
+    assert snap["pi_w0"].shape[0] == 3 and "vf_w0" not in snap and "log_std" not in snap
+    D, m = env.observation_space(env_params).shape[0], env.num_actions
+    init = pol.init_params(jax.random.split(key, 3)[0], D, m, cfg.net_arch, hp["log_std_init"])
+    for k in ("pi_w0", "pi_b0", "pi_w2"):
+        np.testing.assert_array_equal(snap[k][0], np.asarray(init[k]))
+        np.testing.assert_array_equal(snap[k][2], out["params"][k])
+    # the first update moved the weights (the last one has learning rate 0: lin_ reaches 0 at the budget, as SB3's)
+    assert not np.array_equal(snap["pi_w0"][1], snap["pi_w0"][0])
+    np.testing.assert_array_equal(snap["obs_mean"][2], out["obs_mean"])
+    np.testing.assert_array_equal(snap["obs_var"][2], out["obs_var"])
+    np.testing.assert_allclose(out["params"]["pi_w0"], out_a["params"]["pi_w0"][0], rtol=1e-4, atol=1e-6)

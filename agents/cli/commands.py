@@ -15,7 +15,7 @@ from ..benchmark.plan import AGENTS, BUDGETS
 from ..config.envs import ENVS
 from ..training.seeds import TUNING, check_training_seeds
 
-__all__ = ["train_command", "evaluate_command", "benchmark_command", "tune_command"]
+__all__ = ["TRAINERS", "train_command", "evaluate_command", "benchmark_command", "tune_command"]
 
 
 def _usage_error(msg: str) -> None:
@@ -35,6 +35,16 @@ def _check_out_dir(path: str | None, option: str) -> None:
 
 
 
+
+#: ``train --trainer``: sb3 (Stable-Baselines3 / SBX, agents.training.train) or jax (agents.training.jax.run)
+TRAINERS = ("sb3", "jax")
+#: train options the jitted trainer does not take (argparse dest, option, whether it was given)
+_NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("multi_agent", "--multi-agent", bool),
+            ("hybrid", "--hybrid", lambda v: v is not None), ("tensorboard", "--tensorboard", lambda v: v is not None),
+            ("checkpoint_freq", "--checkpoint-freq", lambda v: v is not None),
+            ("allow_custom_env", "--allow-custom-env", bool), ("verbose", "--verbose", bool))
+_JAX_OPTIONS = ("--algo ppo, --env, --timesteps, --seed, --out, --hyperparams, --recipe, --threads, --overwrite, "
+                "--no-progress")
 
 #: the options that define a run (argparse dest, option, config.json key); --resume checks them
 _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_agent", "--multi-agent", "multi_agent"),
@@ -72,34 +82,16 @@ def _hp_subset(given: dict, stored: dict, prefix: str = "") -> list[str]:
 
 
 def train_command(args) -> int:
-    from ..config.envs import EnvNameError, check_env_name
     from ..config.hyperparam_files import HyperparamsError
     from ..training.runs import default_run_dir
     from ..training.train import train
 
+    if getattr(args, "trainer", "sb3") == "jax":
+        return _train_jax(args)
     if args.resume is not None:
         return _resume(args)
     args.algo = args.algo or "ppo"
-    args.seed = 0 if args.seed is None else args.seed
-    try:  # a training seed's env copies must not replay evaluation or tuning episodes (agents/training/seeds.py)
-        check_training_seeds(args.seed, 1, name="--seed")
-    except ValueError as exc:
-        _usage_error(str(exc))
-    args.multi_agent = bool(args.multi_agent)
-    if args.env is not None and not args.env.strip():
-        _usage_error(f"--env '': expected an env name ({', '.join(ENVS)}) or a Gymnasium id")
-    try:
-        env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
-                             what="--env")
-    except EnvNameError as exc:
-        _usage_error(str(exc))
-    if args.recipe is not None:
-        from ..training.recipes import merge_overrides, recipe_file_section
-
-        try:
-            args.hyperparams = merge_overrides(recipe_file_section(args.recipe, env), args.hyperparams)
-        except HyperparamsError as exc:
-            _usage_error(f"--recipe: {exc}")
+    env = _new_run_env(args)
     out = args.out or default_run_dir(env, args.algo, args.multi_agent, args.seed)
     _check_out_dir(out, "--out")
     _check_out_dir(args.tensorboard, "--tensorboard")
@@ -120,6 +112,72 @@ def train_command(args) -> int:
         _interrupted(out, exc)
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
+    return 0
+
+
+def _new_run_env(args) -> str:
+    """The checks of a new run's seed, env and ``--recipe`` (merged into ``args.hyperparams``); the env's name."""
+    from ..config.envs import EnvNameError, check_env_name
+    from ..config.hyperparam_files import HyperparamsError
+
+    args.seed = 0 if args.seed is None else args.seed
+    try:  # a training seed's env copies must not replay evaluation or tuning episodes (agents/training/seeds.py)
+        check_training_seeds(args.seed, 1, name="--seed")
+    except ValueError as exc:
+        _usage_error(str(exc))
+    args.multi_agent = bool(args.multi_agent)
+    if args.env is not None and not args.env.strip():
+        _usage_error(f"--env '': expected an env name ({', '.join(ENVS)}) or a Gymnasium id")
+    try:
+        env = check_env_name(args.env or "tracking", multi_agent=args.multi_agent, allow_custom=args.allow_custom_env,
+                             what="--env")
+    except EnvNameError as exc:
+        _usage_error(str(exc))
+    if args.recipe is not None:
+        from ..training.recipes import merge_overrides, recipe_file_section
+
+        try:
+            args.hyperparams = merge_overrides(recipe_file_section(args.recipe, env), args.hyperparams)
+        except HyperparamsError as exc:
+            _usage_error(f"--recipe: {exc}")
+    return env
+
+
+def _train_jax(args) -> int:
+    """``train --trainer jax``: the jitted trainer (:func:`agents.training.jax.run.train_jax`); the SB3-only
+    options are usage errors."""
+    from ..config.hyperparam_files import HyperparamsError
+    from ..training.jax import ALGOS
+    from ..training.runs import default_run_dir
+
+    for dest, opt, given in _NOT_JAX:
+        if given(getattr(args, dest)):
+            _usage_error(f"--trainer jax does not support {opt}; it supports {_JAX_OPTIONS}")
+    args.algo = args.algo or "ppo"
+    if args.algo not in ALGOS:
+        _usage_error(f"--trainer jax implements --algo {' | '.join(ALGOS)}, not {args.algo} (use --trainer sb3 for "
+                     f"{args.algo})")
+    env = _new_run_env(args)
+    from ..training.jax.run import JaxRunError, jax_env, train_jax
+
+    try:
+        env = jax_env(env)[0]
+    except JaxRunError as exc:
+        _usage_error(str(exc))
+    out = args.out or default_run_dir(env, f"{args.algo}_jax", False, args.seed)
+    _check_out_dir(out, "--out")
+    if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
+        _usage_error(_occupied_run_dir(out))
+    try:
+        res = train_jax(env, args.algo, timesteps=args.timesteps, seed=args.seed, out=out,
+                        hyperparams=args.hyperparams, threads=args.threads, progress=not args.no_progress)
+    except (JaxRunError, HyperparamsError) as exc:
+        _usage_error(str(exc))
+    except KeyboardInterrupt as exc:
+        _interrupted(out, exc)
+    c = res.config
+    print(f"trained {c['algo']} (jax) on {c['env']}: {c['timesteps_done']} env steps in {c['train_seconds']:.1f} s "
+          f"(compiled in {c['compile_seconds']:.1f} s) -> {res.path}")
     return 0
 
 

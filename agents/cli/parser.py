@@ -10,7 +10,7 @@ from ..benchmark.plan import AGENTS, BUDGETS
 from ..config.envs import ENVS, FAULT_FREE, TASKS
 from ..config.hyperparam_files import ALGOS
 from ..training.seeds import EVALUATION, TRAINING, TUNING
-from .commands import benchmark_command, evaluate_command, train_command, tune_command
+from .commands import TRAINERS, benchmark_command, evaluate_command, train_command, tune_command
 
 __all__ = ["add_parser"]
 
@@ -24,6 +24,10 @@ def add_parser(sub) -> None:
                    help=f"{' | '.join(ENVS)} (default tracking), or a Gymnasium id")
     p.add_argument("--algo", choices=ALGOS, default=None, help="ppo (default) | sac | td3 | crossq (the off-policy algorithms train with SBX when the jax "
                         "extra is installed, else with stable-baselines3 / sb3-contrib)")
+    p.add_argument("--trainer", choices=TRAINERS, default="sb3",
+                   help="sb3 (default): Stable-Baselines3 / SBX on the compiled envs; jax: the jitted trainer "
+                        "(agents.training.jax: the whole run one compiled function on dobs_envs.jax; --algo ppo; "
+                        "exports policy.npz + policy.json)")
     p.add_argument("--multi-agent", action="store_true", default=None,
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
     p.add_argument("--timesteps", type=_positive_int, default=None,
@@ -36,7 +40,8 @@ def add_parser(sub) -> None:
     p.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     p.add_argument("--checkpoint-freq", type=_nonnegative_int, default=None,
                    help="env steps between checkpoints (0: none)")
-    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs)")
+    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1: fastest for small MLPs); 1 also runs XLA on one thread "
+                        "(SBX, --trainer jax), more leaves XLA its default pool")
     p.add_argument("--hyperparams", type=_json_object, default=None,
                    help='JSON overrides, e.g. \'{"learning_rate": 1e-4}\'')
     p.add_argument("--recipe", default=None, metavar="FILE",
@@ -55,7 +60,8 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("evaluate", help="evaluate a trained run directory on seeded episodes")
     p.add_argument("--model", required=True,
-                   help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip)")
+                   help="run directory (or its model.zip, or a checkpoint DIR/checkpoints/<algo>_<steps>_steps.zip), or "
+                        "the directory of a jitted run (train --trainer jax: its policy.npz + policy.json)")
     p.add_argument("--episodes", type=_positive_int, default=10)
     p.add_argument("--seed", type=_seed, default=TUNING.start,
                    help=f"episode k is reset with seed + k (default {TUNING.start}: the {TUNING}, for tuning and "

@@ -8,6 +8,10 @@ loaded by the implementation the run records (``config.json`` ``library``; :func
 ``model.zip`` and ``vecnormalize.pkl`` are read without running code from them (:mod:`agents.training.run_pickles`:
 a refused class raises :class:`agents.training.run_pickles.PickleRefused`, a :class:`RunDirError`; SBX networks are
 read as arrays into a fresh policy).
+
+A jitted run (``dobs-envs train --trainer jax``, :mod:`agents.training.jax.run`) loads as a :class:`JaxTrainedAgent`:
+its exported ``policy.npz`` + ``policy.json`` acted by :class:`agents.training.jax.numpy_policy.NumpyPolicy` (numpy
+only, read with ``allow_pickle=False``) on the task's compiled Gymnasium env.
 """
 from __future__ import annotations
 
@@ -20,7 +24,7 @@ from .algos import BackendUnavailable, backend_of
 from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
 
-__all__ = ["TrainedAgent", "load_agent", "evaluate_model"]
+__all__ = ["TrainedAgent", "JaxTrainedAgent", "load_agent", "evaluate_model"]
 
 
 class TrainedAgent:
@@ -143,6 +147,42 @@ class TrainedAgent:
         return policy
 
 
+class JaxTrainedAgent:
+    """A jitted run loaded for evaluation (centralised): ``policy_for(env)`` is its
+    :class:`agents.training.jax.numpy_policy.NumpyPolicy` (``obs -> input`` of the task's Gymnasium env, its
+    default ``normalized_actions=False``); ``name`` ``"PPO (JAX)"``."""
+
+    multi_agent = False
+    hybrid = None
+
+    def __init__(self, path: str, config: dict):
+        import os
+
+        from .jax.numpy_policy import NumpyPolicy
+
+        self.path, self.config, self.algo = path, config, config["algo"]
+        self.model_path = os.path.join(path, "policy.npz")
+        # arrays read with allow_pickle=False; a damaged or refused file is a RunDirError naming it
+        self.policy = load_or_refuse(self.model_path, lambda: NumpyPolicy(path))
+        if self.policy.meta.get("env_id") != config.get("env_id"):
+            raise RunDirError(f"{path!r}: policy.json's env_id {self.policy.meta.get('env_id')!r} is not the run's "
+                              f"{config.get('env_id')!r} (config.json)")
+
+    @property
+    def name(self) -> str:
+        return f"{self.algo.upper()} (JAX)"
+
+    def policy_for(self, env, deterministic: bool = True) -> Callable:
+        """The exported deterministic policy (``deterministic`` must be True: no stochastic policy is exported)."""
+        if not deterministic:
+            raise ValueError("a jitted run exports its deterministic policy only")
+        shape = getattr(env.observation_space, "shape", None)
+        if shape != (self.policy.obs_dim,):
+            raise ValueError(f"the exported policy expects observations of shape ({self.policy.obs_dim},), the env "
+                             f"gives {shape}")
+        return self.policy
+
+
 def _run_recipe(files):
     """The :class:`agents.training.recipes.Recipe` of a run (its ``config.json``): what the model's rebuilt objects
     come from."""
@@ -156,9 +196,16 @@ def _run_recipe(files):
         raise RunDirError(f"{files.run_dir}/config.json: its hyperparams are not a recipe ({exc})") from None
 
 
-def load_agent(path: str, device: str = "cpu") -> TrainedAgent:
+def load_agent(path: str, device: str = "cpu") -> TrainedAgent | JaxTrainedAgent:
     """Load a run directory written by :func:`agents.training.train.train` (or its ``model.zip``, or one of its
-    checkpoints ``<run>/checkpoints/<algo>_<steps>_steps.zip`` with the normaliser saved next to it)."""
+    checkpoints ``<run>/checkpoints/<algo>_<steps>_steps.zip`` with the normaliser saved next to it), or a jitted
+    run's directory (:func:`agents.training.jax.run.train_jax`: a :class:`JaxTrainedAgent`)."""
+    from . import jax as jax_trainer
+    from .runs import _run_dir_of, read_run_config
+
+    cfg = read_run_config(path)
+    if cfg.get("trainer") == jax_trainer.TRAINER:
+        return JaxTrainedAgent(_run_dir_of(path)[0], cfg)
     return TrainedAgent(path, device=device)
 
 

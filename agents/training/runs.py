@@ -11,6 +11,10 @@ A run directory (``runs/<env>_<algo>[_ma]_s<seed>`` by default, :func:`default_r
 - ``checkpoints/<algo>_<sb3 steps>_steps.zip`` with its normaliser
   ``<algo>_vecnormalize_<sb3 steps>_steps.pkl``.
 
+A jitted run (``dobs-envs train --trainer jax``, :mod:`agents.training.jax.run`; ``config.json``
+``trainer: "jax"``) holds ``policy.npz`` + ``policy.json`` instead of the model and normaliser,
+``curve.json`` and ``train_curve.json``; it has no checkpoints and cannot be resumed.
+
 :func:`read_run_config` and :func:`run_files` validate a run directory (or its ``model.zip``,
 or one checkpoint) for loading (:func:`agents.training.loading.load_agent`); :func:`resume_point` finds
 where :func:`agents.training.train.resume` continues an interrupted run. A damaged or incomplete run
@@ -26,6 +30,7 @@ import zipfile
 from dataclasses import dataclass
 from typing import Callable
 
+from . import jax as jax_trainer
 from .algos import BACKENDS, LEGACY_LIBRARY
 
 __all__ = ["default_run_dir", "RUNNING", "INTERRUPTED", "COMPLETE", "CHECKPOINT", "RunDirError", "RunFiles",
@@ -55,7 +60,8 @@ class RunDirError(ValueError):
 def clear_run(out: str) -> None:
     """Remove the files of a previous run in ``out`` (a new run replaces it: none of its models,
     normalisers or checkpoints may be mistaken for the new run's, e.g. by :func:`agents.training.train.resume`)."""
-    for f in ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl"):
+    for f in ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "train_curve.json",
+              *jax_trainer.POLICY_FILES):
         if os.path.isfile(os.path.join(out, f)):
             os.remove(os.path.join(out, f))
     ck = os.path.join(out, "checkpoints")
@@ -139,6 +145,16 @@ def read_run_config(path: str, *, require_model: bool = True) -> dict:
     missing = [k for k in ("env", "algo", "multi_agent") if k not in cfg] if isinstance(cfg, dict) else ["all keys"]
     if missing:
         raise RunDirError(f"{cfg_path} lacks {missing}")
+    if cfg.get("trainer") == jax_trainer.TRAINER:  # a jitted run: its exported policy is its model
+        if cfg["algo"] not in jax_trainer.ALGOS or cfg.get("library") != jax_trainer.LIBRARY:
+            raise RunDirError(f"{cfg_path}: a jitted run of {cfg['algo']!r} by {cfg.get('library')!r}; the jitted "
+                              f"trainer here is {jax_trainer.LIBRARY!r} with {list(jax_trainer.ALGOS)}")
+        absent = [f for f in jax_trainer.POLICY_FILES if not os.path.isfile(os.path.join(run, f))]
+        if ckpt is not None:
+            raise RunDirError(f"{run!r} is a jitted run: it has no checkpoints (give the run directory)")
+        if require_model and absent:
+            raise RunDirError(f"{run!r} is not a finished jitted run: {absent} missing")
+        return cfg
     if not isinstance(cfg["algo"], str) or cfg["algo"] not in BACKENDS:
         raise RunDirError(f"{cfg_path}: unknown algo {cfg['algo']!r}")
     library, implementations = cfg.get("library", LEGACY_LIBRARY), [b.library for b in BACKENDS[cfg["algo"]]]

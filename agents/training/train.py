@@ -42,7 +42,7 @@ from .runs import (COMPLETE, INTERRUPTED, RUNNING, RunDirError, clear_run, defau
                    read_run_config, resume_point, save_atomic, write_json_atomic)
 from .seeds import BC_DEMONSTRATION_OFFSET, resume_seed
 
-__all__ = ["train", "resume", "TrainingInterrupted", "TrainResult", "TqdmCallback", "set_threads"]
+__all__ = ["train", "resume", "TrainingInterrupted", "TrainResult", "TqdmCallback", "set_threads", "xla_threads"]
 
 
 #: XLA's CPU flag for one thread, kept for jaxlib versions that honour it (read when JAX creates its CPU
@@ -68,6 +68,13 @@ def set_threads(threads: int | None = 1) -> None:
 
     if threads:
         torch.set_num_threads(int(threads))
+    xla_threads(threads)
+
+
+def xla_threads(threads: int | None = 1) -> None:
+    """With ``threads=1``, XLA single-threaded (``PJRT_NPROC=1`` unless the user set it, and
+    :data:`XLA_ONE_THREAD` added to ``XLA_FLAGS``), the XLA part of :func:`set_threads` (the jitted trainer's,
+    :mod:`agents.training.jax.run`, which needs no torch); effective only before JAX's first computation."""
     if threads == 1:
         os.environ.setdefault(PJRT_THREADS, "1")
         flags = os.environ.get("XLA_FLAGS", "")

@@ -6,16 +6,27 @@
 - :mod:`.normalize`: VecNormalize's observation and reward normalisation as pure functions;
 - :mod:`.policy`: SB3's MlpPolicy actor-critic in JAX;
 - :mod:`.export`: a trained policy written as ``policy.npz`` + ``policy.json``;
-- :mod:`.numpy_policy`: the plain numpy callable that loads it (numpy only: acting needs no JAX).
+- :mod:`.numpy_policy`: the plain numpy callable that loads it (numpy only: acting needs no JAX);
+- :mod:`.run`: ``dobs-envs train --trainer jax``: a run directory of a jitted run (:func:`~.run.train_jax`).
 
 Importing this package imports nothing heavy; the names below load their module on first use.
 """
 import importlib
 
-_LAZY = {"HPARAMS": "ppo", "PPOConfig": "ppo", "make_env": "ppo", "make_train": "ppo", "ppo_config": "ppo",
-         "save_policy": "export", "jax_act": "export", "select_run": "export", "NumpyPolicy": "numpy_policy"}
+#: ``config.json`` ``trainer`` of a jitted run (``dobs-envs train --trainer jax``; SB3 runs record none)
+TRAINER = "jax"
+#: ``config.json`` ``library`` of a jitted run: the trainer's package
+LIBRARY = "agents.training.jax"
+#: the algorithms the jitted trainer implements
+ALGOS = ("ppo",)
+#: the exported policy's files in a run directory (:mod:`.export`, :mod:`.numpy_policy`)
+POLICY_FILES = ("policy.npz", "policy.json")
 
-__all__ = sorted(_LAZY)
+_LAZY = {"HPARAMS": "ppo", "PPOConfig": "ppo", "make_env": "ppo", "make_train": "ppo", "ppo_config": "ppo",
+         "save_policy": "export", "jax_act": "export", "select_run": "export", "policy_arrays": "export",
+         "NumpyPolicy": "numpy_policy", "train_jax": "run"}
+
+__all__ = sorted(_LAZY) + ["TRAINER", "LIBRARY", "ALGOS", "POLICY_FILES"]
 
 
 def __getattr__(name):

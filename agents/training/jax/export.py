@@ -19,7 +19,7 @@ from . import policy as pol
 from .numpy_policy import _FILES, FORMAT, NumpyPolicy
 from .ppo import PPOConfig
 
-__all__ = ["FORMAT", "save_policy", "NumpyPolicy", "jax_act", "select_run"]
+__all__ = ["FORMAT", "policy_arrays", "save_policy", "NumpyPolicy", "jax_act", "select_run"]
 
 
 
@@ -59,19 +59,13 @@ def _version(name: str) -> str | None:
         return None
 
 
-def save_policy(directory: str, result: dict, cfg: PPOConfig, hparams: dict, env, env_params, *,
-                overwrite: bool = False, extra: dict | None = None) -> str:
-    """Write ``policy.npz`` and ``policy.json`` of one run (``result``: the output of ``train``, or
-    :func:`select_run` of a vmapped one) into ``directory``; returns ``directory``.
-
-    Existing policy files are kept unless ``overwrite`` (``FileExistsError`` naming them).
-    ``extra``: JSON-serialisable provenance added under ``"extra"`` (seed, budget, ...)."""
+def policy_arrays(result: dict, cfg: PPOConfig, hparams: dict, env, env_params, *,
+                  extra: dict | None = None) -> tuple[dict, dict]:
+    """``(arrays, meta)``: what :func:`save_policy` writes (``policy.npz``, ``policy.json``) for one run's
+    ``result`` (only ``params``' ``pi_*`` arrays, ``obs_mean`` and ``obs_var`` are read: a snapshot of
+    :func:`agents.training.jax.ppo.make_train` will do); :meth:`NumpyPolicy.from_arrays` acts with them."""
     if result["params"]["pi_w0"].ndim != 2:
         raise ValueError("result holds several runs (a vmapped train's output): pick one with select_run(result, i)")
-    os.makedirs(directory, exist_ok=True)
-    existing = [f for f in _FILES if os.path.exists(os.path.join(directory, f))]
-    if existing and not overwrite:
-        raise FileExistsError(f"{directory} already holds {existing}; pass overwrite=True to replace them")
     low, high, scale = _action_map(cfg, env, env_params)
     arrays = {k: np.asarray(v) for k, v in result["params"].items() if k.startswith("pi_")}
     arrays.update(obs_mean=np.asarray(result["obs_mean"]), obs_var=np.asarray(result["obs_var"]),
@@ -82,6 +76,21 @@ def save_policy(directory: str, result: dict, cfg: PPOConfig, hparams: dict, env
             "epsilon": float(hparams["norm_epsilon"]), "normalize_actions": cfg.normalize_actions,
             "trainer": "agents.training.jax.ppo", "library": "jax", "library_version": _version("jax"),
             "optax_version": _version("optax"), "env_kwargs": cfg.env_kwargs, "extra": extra or {}}
+    return arrays, meta
+
+
+def save_policy(directory: str, result: dict, cfg: PPOConfig, hparams: dict, env, env_params, *,
+                overwrite: bool = False, extra: dict | None = None) -> str:
+    """Write ``policy.npz`` and ``policy.json`` of one run (``result``: the output of ``train``, or
+    :func:`select_run` of a vmapped one) into ``directory``; returns ``directory``.
+
+    Existing policy files are kept unless ``overwrite`` (``FileExistsError`` naming them).
+    ``extra``: JSON-serialisable provenance added under ``"extra"`` (seed, budget, ...)."""
+    arrays, meta = policy_arrays(result, cfg, hparams, env, env_params, extra=extra)
+    os.makedirs(directory, exist_ok=True)
+    existing = [f for f in _FILES if os.path.exists(os.path.join(directory, f))]
+    if existing and not overwrite:
+        raise FileExistsError(f"{directory} already holds {existing}; pass overwrite=True to replace them")
     tmp = os.path.join(directory, ".policy.tmp.npz")
     np.savez(tmp, **arrays)
     os.replace(tmp, os.path.join(directory, "policy.npz"))

@@ -21,11 +21,13 @@ import os
 
 import numpy as np
 
+from . import POLICY_FILES
+
 __all__ = ["FORMAT", "NUMPY_ACTIVATIONS", "NumpyPolicy", "numpy_actor_mean"]
 
 #: the ``format`` field of ``policy.json``
 FORMAT = "dobs_envs.jax_ppo_policy/1"
-_FILES = ("policy.npz", "policy.json")
+_FILES = POLICY_FILES
 
 #: activation names -> numpy functions (the same names as :data:`agents.training.jax.policy.ACTIVATIONS`)
 NUMPY_ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, 0.0)}
@@ -60,23 +62,34 @@ class NumpyPolicy:
             raise FileNotFoundError(f"not an exported policy: {missing} missing")
         with open(paths[1]) as f:
             meta = json.load(f)
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise ValueError(f"{paths[1]}: format {meta.get('format') if isinstance(meta, dict) else meta!r} is not "
-                             f"{FORMAT!r}")
-        if meta.get("activation") not in NUMPY_ACTIVATIONS:
-            raise ValueError(f"{paths[1]}: activation must be one of {list(NUMPY_ACTIVATIONS)}, got "
-                             f"{meta.get('activation')!r}")
         with np.load(paths[0], allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k], np.float64) for k in z.files}
+        self._check(arrays, meta, *paths)
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, meta: dict) -> "NumpyPolicy":
+        """The policy of ``arrays`` and ``meta`` as :func:`agents.training.jax.export.policy_arrays` gives them
+        (what ``policy.npz`` and ``policy.json`` would hold), checked as files are."""
+        self = cls.__new__(cls)
+        self._check({k: np.asarray(v, np.float64) for k, v in arrays.items()}, dict(meta), "arrays", "meta")
+        return self
+
+    def _check(self, arrays: dict, meta: dict, arrays_src: str, meta_src: str) -> None:
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise ValueError(f"{meta_src}: format {meta.get('format') if isinstance(meta, dict) else meta!r} is not "
+                             f"{FORMAT!r}")
+        if meta.get("activation") not in NUMPY_ACTIVATIONS:
+            raise ValueError(f"{meta_src}: activation must be one of {list(NUMPY_ACTIVATIONS)}, got "
+                             f"{meta.get('activation')!r}")
         n = len(meta["net_arch"]) + 1
         need = [f"pi_{p}{i}" for i in range(n) for p in "wb"] + ["obs_mean", "obs_var", "action_low",
                                                                   "action_high", "action_scale"]
         absent = [k for k in need if k not in arrays]
         if absent:
-            raise ValueError(f"{paths[0]}: arrays {absent} missing")
+            raise ValueError(f"{arrays_src}: arrays {absent} missing")
         D, m = int(meta["obs_dim"]), int(meta["act_dim"])
         if arrays["pi_w0"].shape[0] != D or arrays[f"pi_w{n - 1}"].shape[1] != m or arrays["obs_mean"].shape != (D,):
-            raise ValueError(f"{paths[0]}: array shapes do not match obs_dim={D}, act_dim={m}")
+            raise ValueError(f"{arrays_src}: array shapes do not match obs_dim={D}, act_dim={m}")
         self.meta, self.arrays = meta, arrays
         self.obs_dim, self.act_dim = D, m
 

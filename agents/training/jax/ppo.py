@@ -219,13 +219,16 @@ def _clip_by_global_norm(grads, max_norm):
     return jax.tree.map(lambda g: g * scale, grads)
 
 
-def make_train(cfg: PPOConfig, env=None, env_params=None):
+def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
     """``train(key, hparams) -> dict``: one PPO run as a pure function (``jax.jit`` / ``jax.vmap`` it).
 
     Parameters
     ----------
     cfg : the static configuration (:func:`ppo_config`).
     env, env_params : the environment (default :func:`make_env`).
+    snapshots : update counts in ``0 .. cfg.n_updates`` (0: the initial policy) after which the
+        actor and the observation statistics are kept (a learning curve evaluated after the run, as
+        :mod:`agents.training.jax.run` does); default none.
 
     Returns
     -------
@@ -238,7 +241,9 @@ def make_train(cfg: PPOConfig, env=None, env_params=None):
         - ``curve``: per update ``steps (U,)`` (env steps after its rollout), ``episode_return (U,)`` and
           ``episode_length (U,)`` (means over the episodes that ended in that rollout, NaN if none:
           the raw rewards, as SB3's ``Monitor``), ``episodes (U,)`` (their count), ``approx_kl (U,)``,
-          ``value_loss (U,)`` (means over the update's minibatches).
+          ``value_loss (U,)`` (means over the update's minibatches);
+        - ``snapshots`` (with ``snapshots``, K of them in increasing order): the actor's arrays ``pi_*``
+          ``(K, ...)``, ``obs_mean (K, D)`` and ``obs_var (K, D)`` after those updates.
     """
     if env is None:
         env, env_params = make_env(cfg)
@@ -256,6 +261,21 @@ def make_train(cfg: PPOConfig, env=None, env_params=None):
     v_reset = jax.vmap(env.reset, in_axes=(0, None))
     adam = optax.scale_by_adam(eps=1e-5)
     act_fn = cfg.activation
+    snap_at = None
+    if snapshots is not None:
+        snap_at = np.unique(np.asarray([int(u) for u in snapshots], dtype=np.int64))
+        if snap_at.size == 0 or snap_at[0] < 0 or snap_at[-1] > cfg.n_updates:
+            raise ValueError(f"snapshots must be update counts in 0..{cfg.n_updates}, got {list(snapshots)!r}")
+
+    def snapshot(params, norm):
+        return {**{k: v for k, v in params.items() if k.startswith("pi_")}, "obs_mean": norm.obs_rms.mean,
+                "obs_var": norm.obs_rms.var}
+
+    def keep(buf, snap, count):
+        """``buf`` with ``snap`` written at the slot of update count ``count`` (unchanged if none)."""
+        slot = jnp.minimum(jnp.searchsorted(jnp.asarray(snap_at), count), snap_at.size - 1)
+        hit = jnp.asarray(snap_at)[slot] == count
+        return jax.tree.map(lambda b, x: b.at[slot].set(jnp.where(hit, x.astype(b.dtype), b[slot])), buf, snap)
 
     def train(key, hparams: dict):
         hp = {k: jnp.asarray(hparams[k]) for k in HPARAMS}
@@ -359,11 +379,25 @@ def make_train(cfg: PPOConfig, env=None, env_params=None):
             return (params, opt_state, norm, env_state, obs_n, ep_ret, ep_len, key), curve
 
         carry = (params, opt_state, norm, env_state, obs_n, zeros, jnp.zeros((B,), jnp.int32), key)
-        carry, curve = jax.lax.scan(update, carry, jnp.arange(cfg.n_updates))
+        if snap_at is None:
+            carry, curve = jax.lax.scan(update, carry, jnp.arange(cfg.n_updates))
+        else:
+            first = snapshot(params, norm)
+            buf = keep(jax.tree.map(lambda x: jnp.zeros((snap_at.size,) + x.shape, x.dtype), first), first, 0)
+
+            def update_and_keep(c, u):
+                c, buf = c
+                c, curve = update(c, u)
+                return (c, keep(buf, snapshot(c[0], c[2]), u + 1)), curve
+
+            (carry, buf), curve = jax.lax.scan(update_and_keep, (carry, buf), jnp.arange(cfg.n_updates))
         params, norm = carry[0], carry[2]
-        return {"params": params, "obs_mean": norm.obs_rms.mean, "obs_var": norm.obs_rms.var,
-                "obs_count": norm.obs_rms.count, "ret_var": norm.ret_rms.var, "ret_count": norm.ret_rms.count,
-                "curve": curve}
+        out = {"params": params, "obs_mean": norm.obs_rms.mean, "obs_var": norm.obs_rms.var,
+               "obs_count": norm.obs_rms.count, "ret_var": norm.ret_rms.var, "ret_count": norm.ret_rms.count,
+               "curve": curve}
+        if snap_at is not None:
+            out["snapshots"] = buf
+        return out
 
     return train
 

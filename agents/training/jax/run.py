@@ -1,0 +1,213 @@
+"""``dobs-envs train --trainer jax``: one jitted PPO run (:mod:`.ppo`) written as a run directory.
+
+:func:`train_jax` resolves the same recipe as SB3 PPO (:func:`agents.training.recipes.resolve_recipe`, overrides
+merged), compiles the whole run as one function (:func:`.ppo.make_train`, ``jax.random.PRNGKey(seed)``), runs it and
+writes into ``out`` (nothing pickled):
+
+- ``policy.npz`` + ``policy.json``: the exported deterministic policy (:func:`.export.save_policy`; acted by
+  :class:`.numpy_policy.NumpyPolicy`, numpy only);
+- ``curve.json``: the learning curve in the format of :mod:`agents.training.curves` (what the benchmark reads
+  for SB3 runs): ``{"seeds", "paper_cost", "points": [{"env_steps", "cost_ratio"}]}``, the cost ratio
+  ``J_policy / J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the
+  task's own compiled environment, of the policy kept after evenly spaced updates (the run's snapshots,
+  :func:`.ppo.make_train`'s ``snapshots``; the first point is the initial policy), evaluated after the run;
+- ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the
+  training episodes that ended in the rollout, their count, approximate KL, value loss; ``null`` where no
+  episode ended);
+- ``config.json``: ``trainer: "jax"``, ``library`` (:data:`agents.training.jax.LIBRARY`) and ``library_version``
+  (dobs-envs'), ``jax_version``, ``jaxlib_version``, ``optax_version``, the env and its JAX id, the recipe
+  (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the
+  budget), ``n_updates``, the times (``setup_seconds``, ``compile_seconds`` / ``compile_cpu_seconds``,
+  ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and ``status``.
+
+CPU times are this process's (``time.process_time``), wall times ``time.perf_counter``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from importlib import metadata
+
+import numpy as np
+
+from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
+from ..seeds import TUNING
+from ..train import TrainResult, xla_threads
+from . import ALGOS, LIBRARY, TRAINER
+
+__all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
+
+#: learning-curve episodes use seeds ``CURVE_SEED + k`` (the tuning range, as the benchmark's curves)
+CURVE_SEED = TUNING.start
+#: learning-curve points after the initial one (fewer when the run has fewer updates)
+CURVE_POINTS = 10
+#: learning-curve episodes per point
+CURVE_EPISODES = 3
+
+
+class JaxRunError(ValueError):
+    """What :func:`train_jax` refuses before touching the run directory: an algorithm, env or hyperparameter the
+    jitted trainer does not implement (one line naming it)."""
+
+
+def _version(name: str) -> str | None:
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def jax_env(env: str) -> tuple[str, str]:
+    """``(name, Gymnasium id)`` of ``env`` (a name of :data:`agents.config.envs.ENVS` or a Gymnasium id) if the JAX
+    environments have it (:func:`dobs_envs.jax.registered_envs`), else :class:`JaxRunError` listing their names."""
+    from dobs_envs.registry import ENVIRONMENTS  # registered_envs() are their ids; read here without importing JAX
+
+    from ...config.envs import env_key, gym_id
+
+    gid = gym_id(env_key(env))
+    names = [e.name for e in ENVIRONMENTS.values() if e.gym_id == gid]
+    if not names:
+        raise JaxRunError(f"--env {env!r}: the jitted trainer runs the JAX environments "
+                          f"({', '.join(ENVIRONMENTS)})")
+    return names[0], gid
+
+
+def curve_updates(n_updates: int, points: int = CURVE_POINTS) -> list[int]:
+    """Update counts of the learning-curve points: 0 (the initial policy) and ``min(points, n_updates)``
+    evenly spaced counts ending at ``n_updates``."""
+    k = min(int(points), int(n_updates))
+    return sorted({0, *(int(round(n_updates * (i + 1) / k)) for i in range(k))})
+
+
+def _plain(x):
+    """JSON-able lists of an array (NaN -> None)."""
+    return [None if isinstance(v, float) and math.isnan(v) else v for v in np.asarray(x).tolist()]
+
+
+def _curve(snapshots: dict, updates: list, rollout: int, cfg, hp, env, env_params, env_name: str,
+           seeds: list) -> dict:
+    """``curve.json``'s document: every snapshot's policy on the task's own compiled env (the harness of
+    :func:`agents.training.curves.make_curve_callback`: :func:`agents.evaluate.run_episode`)."""
+    from ...config.envs import gym_factory
+    from ...evaluate import run_episode
+    from ..curves import paper_costs
+    from .export import policy_arrays
+    from .numpy_policy import NumpyPolicy
+
+    ref = paper_costs(env_name, {}, seeds)
+    env_np = gym_factory(env_name, {})()
+    points = []
+    for k, u in enumerate(updates):
+        snap = {key: np.asarray(v[k]) for key, v in snapshots.items()}
+        result = {"params": {key: v for key, v in snap.items() if key.startswith("pi_")},
+                  "obs_mean": snap["obs_mean"], "obs_var": snap["obs_var"]}
+        pol = NumpyPolicy.from_arrays(*policy_arrays(result, cfg, hp, env, env_params))
+        costs = np.array([run_episode(env_np, pol, s, parallel=False).cost for s in seeds])
+        points.append({"env_steps": int(u) * rollout, "cost_ratio": (costs / ref).tolist()})
+    env_np.close()
+    return {"seeds": list(seeds), "paper_cost": ref.tolist(), "points": points}
+
+
+def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed: int = 0, out: str,
+              hyperparams: dict | None = None, threads: int | None = 1, progress: bool = True,
+              curve_points: int = CURVE_POINTS, curve_seeds=None) -> TrainResult:
+    """Train ``algo`` with the jitted trainer on the JAX form of ``env`` and write the run directory ``out``
+    (see the module doc; files of a previous run in ``out`` are replaced, other files kept: the caller decides
+    whether ``out`` may be written).
+
+    Parameters
+    ----------
+    env : a name of the JAX environments or its Gymnasium id (:func:`jax_env`; the run records the name).
+    timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole rollouts of
+        ``n_envs * n_steps`` steps (``timesteps_done >= timesteps``, as SB3).
+    hyperparams : overrides merged over the recipe (``agents/config/hyperparams/ppo.yaml``).
+    threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
+    progress : one line on stderr per phase (compile, run, curve).
+    curve_points, curve_seeds : the learning curve's points after the initial one (:func:`curve_updates`) and its
+        episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).
+
+    Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
+    trainer does not implement (:func:`.ppo.ppo_config` names the key);
+    :class:`agents.config.hyperparam_files.HyperparamsError` from the recipe files.
+
+    An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
+    generator: ``jax_enable_x64`` is switched on for the process (the run stays float32).
+    """
+    if algo not in ALGOS:
+        raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
+    seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
+    if not seeds or not all(s in TUNING for s in seeds):
+        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {seeds}")
+    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
+        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
+    env, gid = jax_env(env)
+    xla_threads(threads)
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
+    import jax
+
+    from dobs_envs.registry import ENVIRONMENTS
+
+    from ..recipes import resolve_recipe
+    from .export import save_policy
+    from .ppo import make_env, make_train, ppo_config
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[jax ppo {env}] {msg}", file=sys.stderr, flush=True)
+
+    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
+        # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
+        # (docs/jax.md); the run still simulates and trains in float32 (ppo_config's dtype)
+        jax.config.update("jax_enable_x64", True)
+    recipe = resolve_recipe(algo, env, overrides=hyperparams)
+    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
+    try:
+        cfg, hp = ppo_config(recipe.hyperparams, gid, total_timesteps=timesteps)
+        env_jax, env_params = make_env(cfg)
+    except ValueError as exc:
+        raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
+    updates = curve_updates(cfg.n_updates, curve_points)
+    train = jax.jit(make_train(cfg, env_jax, env_params, snapshots=updates))
+    key = jax.random.PRNGKey(seed)
+    setup = time.perf_counter() - t_wall
+    config = {
+        "env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
+        "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
+        "env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "seed": int(seed),
+        "key": f"jax.random.PRNGKey({int(seed)})", "timesteps": timesteps, "timesteps_done": 0,
+        "n_updates": cfg.n_updates, "rollout": cfg.n_envs * cfg.n_steps, "n_agents": 1,
+        "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
+        "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams),
+        "policy": "policy.npz", "curve_seeds": seeds,
+        "status": RUNNING,
+    }
+    os.makedirs(out, exist_ok=True)
+    clear_run(out)
+    write_json_atomic(os.path.join(out, "config.json"), config)
+
+    say(f"compiling {cfg.n_updates} updates of {cfg.n_envs} x {cfg.n_steps} steps ...")
+    w0, c0 = time.perf_counter(), time.process_time()
+    compiled = train.lower(key, hp).compile()
+    compile_s, compile_cpu = time.perf_counter() - w0, time.process_time() - c0
+    say(f"compiled in {compile_s:.1f} s; training {cfg.steps_done} env steps ...")
+    w0, c0 = time.perf_counter(), time.process_time()
+    result = jax.device_get(jax.block_until_ready(compiled(key, hp)))
+    train_s, train_cpu = time.perf_counter() - w0, time.process_time() - c0
+    say(f"trained in {train_s:.1f} s; learning curve: {len(updates)} points x {len(seeds)} episodes ...")
+
+    save_policy(out, result, cfg, hp, env_jax, env_params, overwrite=True,
+                extra={"seed": int(seed), "timesteps": timesteps, "timesteps_done": cfg.steps_done})
+    w0 = time.perf_counter()
+    curve = _curve(result["snapshots"], updates, cfg.n_envs * cfg.n_steps, cfg, hp, env_jax, env_params, env, seeds)
+    write_json_atomic(os.path.join(out, "curve.json"), curve)
+    c = result["curve"]
+    write_json_atomic(os.path.join(out, "train_curve.json"), {k: _plain(v) for k, v in c.items()})
+    curve_s = time.perf_counter() - w0
+    config.update(status=COMPLETE, timesteps_done=cfg.steps_done, setup_seconds=setup, compile_seconds=compile_s,
+                  compile_cpu_seconds=compile_cpu, train_seconds=train_s, train_cpu_seconds=train_cpu,
+                  curve_seconds=curve_s, total_seconds=time.perf_counter() - t_wall,
+                  total_cpu_seconds=time.process_time() - t_cpu)
+    write_json_atomic(os.path.join(out, "config.json"), config)
+    return TrainResult(path=out, model=None, seconds=train_s, config=config)
