@@ -52,6 +52,9 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes of the free-running comparison")
     ap.add_argument("--out", help="write the table as JSON (refuses to overwrite)")
     ap.add_argument("--faults", action="store_true", help="only the rows with communication faults")
+    ap.add_argument("--sources", nargs="+", choices=SOURCES, default=list(SOURCES),
+                    help="action sources of the one-step table (default: all)")
+    ap.add_argument("--no-free-run", action="store_true", help="skip the free-running returns")
     a = ap.parse_args(argv)
     if a.out and os.path.exists(a.out):
         print(f"jax_parity: --out {a.out} exists; remove it or choose another path", file=sys.stderr)
@@ -74,7 +77,7 @@ def main(argv=None) -> int:
             entry = ENVIRONMENTS[name]
             structure, params, _ = _build(entry, dict(opts, dtype="float64"))
             mod = importlib.import_module(entry.module)
-            for src in SOURCES:
+            for src in a.sources:
                 rng = np.random.default_rng(7)
                 core = entry.load_class().make_core(1, max_cycles=int(params.max_steps_in_episode), **opts)
                 if src == "random":
@@ -107,7 +110,7 @@ def main(argv=None) -> int:
                       f"{w['steps']} | " + " | ".join(f"{w[c]:.1e}" for c in COLUMNS) + f" | {w['ends']} | "
                       + (f"{w['fault']:.1e} | {w['draws']} |" if "fault" in w else "- | - |"), flush=True)
     print("\npaper controller, free-running, evaluation episodes: largest |J_jax - J_compiled| / |J_compiled|")
-    for name in FREE_RUN:
+    for name in () if a.no_free_run else FREE_RUN:
         if a.faults and not _faulted(name, {}):
             continue
         entry = ENVIRONMENTS[name]
