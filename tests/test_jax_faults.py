@@ -28,9 +28,8 @@ from dobs_envs.sim import fault_rng  # noqa: E402
 jaxenv = pytest.importorskip("dobs_envs.jax")
 from dobs_envs.jax import faults as jfaults  # noqa: E402
 from dobs_envs.jax import parity  # noqa: E402
-from dobs_envs.jax.env import _build  # noqa: E402
 
-from test_jax_parity import ROUND_OFF, _bang_bang, _chattering_band, _paper, _random  # noqa: E402
+from test_jax_parity import ROUND_OFF, _bang_bang, _chattering_band, _paper, _random, _setup  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -62,19 +61,6 @@ def test_faults_need_64_bit_jax():
     with jax.enable_x64(False):
         with pytest.raises(ValueError, match="jax_enable_x64"):
             jaxenv.make("dobs_envs/TrackingLossy-v0", dtype="float32")
-
-
-_BUILT = {}
-
-
-def _setup(name, **options):
-    key = (name, repr(sorted(options.items())))
-    if key not in _BUILT:
-        structure, params, _ = _build(ENVIRONMENTS[name], dict(options, dtype="float64"))
-        _BUILT[key] = (structure, params)
-    structure, params = _BUILT[key]
-    core = ENVIRONMENTS[name].load_class().make_core(1, max_cycles=int(params.max_steps_in_episode), **options)
-    return structure, params, core
 
 
 def _ring_and_path(N):
