@@ -42,7 +42,7 @@ from .numba_cache import ensure_fresh
 from .packing import pack
 from .sim import estimates, step_env
 from .sim.fault_kernel import FaultPeriod, co_link_row, unpack_fault_args
-from .sim.fault_state import FaultState, co_link_numpy, fault_args, faulted_estimates, init_fault_state
+from .sim.fault_state import NO_FAULT, FaultState, co_link_numpy, fault_args, faulted_estimates, init_fault_state
 from .sim.faults import Faults
 from .sim.numpy_step import control_period_faulted_numpy
 from .sim.period_kernel import PeriodArrays, advance_rows, unpack_kernel_args
@@ -166,7 +166,7 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
     """Run ``loop.steps`` Euler steps of every copy in place (``state = (x, z, gamma, gamma_s, v, x_r)``,
     controller gains ``beta (B, Nc)``), the law :class:`~dobs_envs.control.law_kernel.LawArrays` ``law``
     applied at every step, recording into :class:`Recording` ``rec`` every ``loop.stride`` steps;
-    ``kp = (KF, KI)`` the packed kernel arguments. ``fault`` None (the ideal network: a specialisation
+    ``kp = (KF, KI)`` the packed kernel arguments. ``fault`` NO_FAULT (the ideal network: a specialisation
     without fault code) or ``(FF, FI, fs, co_nodes)``, communication faults (module doc): the estimates
     carry the held measurement noise, the law reads the estimates the controllers hold after the C-O links
     (node ``co_nodes[l]``'s row replaced by link ``l``'s held estimate), the Euler steps are faulted."""
@@ -185,7 +185,7 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
     r = np.zeros((Bsz, m))
     w = np.empty(m)
     pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
-    if fault is not None:
+    if len(fault) > 0:
         FF, FI, fst, co_nodes = fault
         ff = unpack_fault_args(FF, FI)
         fs = FaultState(*fst)
@@ -205,7 +205,7 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
                     acc = 0.0
                     for c in range(n):
                         acc += C[i, q, c] * xb[c]
-                    if fault is None:
+                    if len(fault) == 0:
                         y[q] = acc
                     else:
                         y[q] = acc + noise_a[b, i, q]
@@ -214,7 +214,7 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
                     for q in range(p):
                         acc += G_bar[i, c, q] * y[q]
                     xhat[i, c] = acc
-            if fault is None:
+            if len(fault) == 0:
                 xl = xhat
             else:  # the C-O links (not at t = 0), the controllers' held estimates in their node rows
                 if k > 0:
@@ -236,8 +236,8 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
         if record:
             s += 1
         if k < steps:
-            if fault is None:
-                advance_rows(pa, ka, 0, Bsz, None)
+            if len(fault) == 0:
+                advance_rows(pa, ka, 0, Bsz, fault)
             else:
                 advance_rows(pa, ka, 0, Bsz, fperiod)
 
@@ -330,7 +330,7 @@ def rollout(sc, *, dt: float | None = None, t_end: float | None = None, batch: i
                     beta=np.empty((batch, R, Nc)))
     x, z, g, gs, v, xr = (np.array(a, dtype=float, order="C") for a in
                           (state.x, state.z, state.gamma, state.gamma_s, state.v, state.x_r))
-    fault = None
+    fault = NO_FAULT
     if faults is not None:
         fa, fs, co_nodes = _fault_setup(sc, params, faults, state, fault_seeds(fault_seed, batch))
         fault = (*pack(fa), tuple(np.array(a, copy=True, order="C") for a in fs), co_nodes)

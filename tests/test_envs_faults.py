@@ -238,3 +238,45 @@ def test_tracking_lossy_defaults():
     obs, info = venv.reset(seed=0)
     assert obs.shape == (3, 170) and info["oo_received_fraction"].shape == (3, 5)
     venv.close()
+
+
+_SIGNATURES = r'''
+import json
+import numpy as np
+from numba import types
+from dobs_envs.envs import TrackingEnv
+from dobs_envs.envs.step_kernel import advance_batch, advance_range
+from dobs_envs.sim import period_kernel as pk
+B = pk.TILE + pk.MIN_TILE + 1  # whole tiles, a remainder tile and one copy alone: every path of advance_rows
+core = TrackingEnv.make_core(B, faults={"oo_loss": 0.2, "co_loss": 0.1})
+core.reset(None, list(range(B)))
+core.advance(np.zeros((B, core.n_inputs)))
+# the position of the fault argument in each compiled function
+where = {advance_batch: -1, advance_range: -1, pk.advance_rows: -1, pk.period_tile: 4, pk.period_tile_any: 4,
+         pk._scatter: 8, pk.period_copy: 4}
+ideal = lambda t: isinstance(t, (types.NoneType, types.Omitted)) or (isinstance(t, types.BaseTuple) and t.count == 0)
+print(json.dumps({d.py_func.__name__: [ideal(s[i]) for s in d.signatures] for d, i in where.items()}))
+'''
+
+
+def test_a_faulted_network_compiles_no_ideal_engine(tmp_path):
+    """The engine's functions branch on ``len(fault)`` (``NO_FAULT = ()`` on the ideal network), which numba
+    prunes per specialisation both ways: a process that steps only faulted copies compiles no ideal-network
+    specialisation of any engine function (``if fault is None:`` was not pruned for a fault tuple, so a
+    faulted environment compiled the whole ideal engine too: twice the cold compile). (The other way, an
+    ideal-only process compiles no fault code: also measured, 80 s of cold compile, left out of the suite.)
+    Run in a fresh process (this one has compiled both) with an empty numba cache
+    (a kernel loaded from the cache brings its callees inside it, not as specialisations of theirs) and
+    without LLVM optimisation (``NUMBA_OPT=0``: pruning happens before typing, whatever the level)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), NUMBA_OPT="0")
+    out = subprocess.run([sys.executable, "-c", _SIGNATURES], capture_output=True, text=True, timeout=1200, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    ideal = json.loads(out.stdout.strip().splitlines()[-1])
+    for name, flags in ideal.items():
+        assert flags, f"{name} was not compiled: the test no longer reaches it"
+        assert not any(flags), f"{name} has a specialisation for the ideal network: {flags}"

@@ -62,7 +62,7 @@ from ..linalg.validation import NUMERIC_KINDS, as_array, as_symmetric, check_see
 from ..sim import SimParams, SimState
 from ..packing import pack
 from ..sim.fault_kernel import period_draws_compiled
-from ..sim.fault_state import fault_args, init_fault_state
+from ..sim.fault_state import NO_FAULT, fault_args, init_fault_state
 from ..sim.kernel_args import StateArrays
 from .calibration import auto_action_bound
 from .distributions import N_RANDOM_TERMS, ResetDistribution
@@ -520,7 +520,7 @@ class EnvCore:
             u = np.ascontiguousarray(u, dtype=np.float64)
         if u.shape != (self.num_envs, self.n_inputs):
             raise ValueError(f"u must have shape ({self.num_envs}, {self.n_inputs}) (copies, inputs), got {u.shape}")
-        fault = None if self.faults is None else (self._FP, self._fs, self._rx, self._fconsts)
+        fault = NO_FAULT if self.faults is None else (self._FP, self._fs, self._rx, self._fconsts)
         if len(self.ranges) == 1:
             bad = advance_batch(self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI,
                                 self._consts, fault)
@@ -562,7 +562,7 @@ class EnvCore:
         cp = lambda arrs: tuple(a.copy() for a in arrs)  # noqa: E731
         out = {"state": cp(self._state), "W": self._W.copy(), "obs": self._obs.copy(), "outs": cp(self._outs),
                "sig": self._sig.copy(), "ka": self._ka, "SF": self._SF, "SI": self._SI,
-               "consts": self._consts}
+               "consts": self._consts, "fault": NO_FAULT}
         if self.faults is not None:  # advance_batch's / advance_reference's fault=(fp, fs, rx, fconsts)
             out.update(fault=(self._FP, cp(self._fs), cp(self._rx), self._fconsts))
         return out

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..packing import unpack
 from ..sim import fault_rng
-from ..sim.fault_state import FaultArgs, FaultState, co_link_numpy, oo_losses
+from ..sim.fault_state import NO_FAULT, FaultArgs, FaultState, co_link_numpy, oo_losses
 from ..sim.kernel_args import StateArrays, unpack_kernel_args
 from ..sim.numpy_step import control_period_faulted_numpy, control_period_numpy
 from .features import FeatureArgs
@@ -30,13 +30,13 @@ from .step_kernel import REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_
 __all__ = ["advance_reference"]
 
 
-def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
+def advance_reference(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=NO_FAULT):
     """Numpy counterpart of :func:`~dobs_envs.envs.step_kernel.advance_batch` (same arguments, same effects:
     with ``fault = (fp, fs, rx, fconsts)``, ``fs`` and ``rx`` updated in place)."""
     bad = np.flatnonzero(~np.all(np.isfinite(u), axis=1))
     if bad.size:
         return int(bad[0])
-    if fault is not None:
+    if len(fault) > 0:
         fp, fs, rx, fconsts = fault
         fault = (unpack(FaultArgs, *fp), fs, rx, fconsts)
     with np.errstate(all="ignore"):
@@ -89,7 +89,7 @@ def _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link: bool):
     return fs
 
 
-def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults=None):
+def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults):
     s = StateArrays(*state)
     t, x, z, gamma, gamma_s, v, x_r = s.t, s.x, s.z, s.gamma, s.gamma_s, s.v, s.x_r
     outf, outb, reason, cycles = outs
@@ -114,7 +114,7 @@ def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults=None):
     p = SimpleNamespace(**k._asdict(), laplacian=lap, P_u=P_u)
     U = W[:, F + N:F + N + m].copy()
     Rc = W[:, off[7]:off[7] + m].copy()
-    if faults is None:
+    if len(faults) == 0:
         x[:], z[:], gamma[:], gamma_s[:], v[:], x_r[:] = control_period_numpy(x, z, gamma, gamma_s, v, x_r, U, Rc, p)
     else:
         ff, fs_arrays, rx, fconsts = faults
@@ -128,7 +128,7 @@ def _advance(state, W, obs, outs, u, sig, ka, SF, SI, consts, faults=None):
     cycles += 1
     rows = np.arange(B)
     write_features_reference(rows, state, W, obs, SF, SI, c.has_ref, (cost, err, xnorm, finite))
-    if faults is not None:
+    if len(faults) > 0:
         _fault_observations(x, z, W, obs, fa, ff, fs, rx, fconsts, link=True)
     # 5: reward and termination
     if c.reward_code == 1:  # log

@@ -18,9 +18,9 @@ which threads may run concurrently on disjoint ranges: it releases the GIL):
    observations and feature vector are cleaned (NaN -> 0, +-inf -> +-largest finite value of
    their dtype); otherwise truncation (reason 3) when ``cycles >= max_cycles >= 0``.
 
-Communication faults (the core's ``faults`` option, issue 23): the argument ``fault`` is ``None`` (numba
-compiles the step without any fault code: the ``if fault is None:`` branches are pruned per
-specialisation) or the plain tuple ``(fp, fs, rx, fconsts)`` of :func:`~dobs_envs.envs.features.env_fault`.
+Communication faults (the core's ``faults`` option, issue 23): the argument ``fault`` is
+:data:`~dobs_envs.sim.fault_state.NO_FAULT` (an empty tuple: numba compiles the step without any fault
+code, the ``if len(fault) == 0:`` branches are pruned per specialisation, both ways) or the plain tuple ``(fp, fs, rx, fconsts)`` of :func:`~dobs_envs.envs.features.env_fault`.
 Then step 3 is the faulted control period (:class:`~dobs_envs.sim.fault_kernel.FaultPeriod`), step 4
 computes the features with the period's held measurement noise (``y_i = C_i x + n_i``, the draw the
 observer node uses) and, per chunk of :data:`ROWS_CHUNK` copies, what the agents observe at the boundary
@@ -198,7 +198,7 @@ def advance_range(lo, hi, u, args, fault):
     """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
     releases the GIL: threads may advance disjoint ranges of one batch concurrently. ``args`` the plain
     tuple ``(state, W, obs, outs, sig, ka, SF, SI, consts)`` (:func:`advance_batch`'s arguments but ``u``),
-    ``fault`` None or the faults' plain tuple (module doc)."""
+    ``fault`` NO_FAULT or the faults' plain tuple (module doc)."""
     state, W, obs, outs, sig, kp, SF, SI, consts = args
     KF, KI = kp
     ka = unpack_kernel_args(KF, KI)
@@ -217,8 +217,8 @@ def advance_range(lo, hi, u, args, fault):
     apply_inputs(lo, hi, t, st.v, W, u, sig, ou, c)
     # 3: one control period (held input and reference command)
     pa = PeriodArrays(x, st.z, st.gamma, st.gamma_s, st.v, st.x_r, W[:, ou:ou + m], W[:, o_r:o_r + m])
-    if fault is None:
-        advance_rows(pa, ka, lo, hi, None)
+    if len(fault) == 0:
+        advance_rows(pa, ka, lo, hi, fault)
     else:
         ef = env_fault(fault)
         noisy = ef.args.noise_std > 0.0
@@ -228,7 +228,7 @@ def advance_range(lo, hi, u, args, fault):
     # 4-5: features, reward, termination
     obs2 = obs.reshape((obs.shape[0], obs.shape[1] * obs.shape[2]))
     y = np.empty(fa.C.shape[1])
-    if fault is None:
+    if len(fault) == 0:
         for b in range(lo, hi):
             t[b] = t[b] + c.period
             cycles[b] += 1
@@ -260,7 +260,7 @@ def advance_range(lo, hi, u, args, fault):
 
 
 @_njit
-def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
+def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault):
     """One step of every copy (see module docstring), serial.
 
     Parameters
@@ -274,7 +274,7 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
     sig : (3, B, m_v, L): amplitudes, frequencies, phases of the "random" disturbance.
     ka : ``SimParams.kernel_packed`` (KF, KI); SF, SI : :func:`~dobs_envs.envs.features.pack_static`.
     consts : a plain tuple of the fields of :class:`StepConsts`, in its field order.
-    fault : None, or ``(fp, fs, rx, fconsts)`` (:func:`~dobs_envs.envs.features.env_fault`): ``fs`` and
+    fault : NO_FAULT (``()``), or ``(fp, fs, rx, fconsts)`` (:func:`~dobs_envs.envs.features.env_fault`): ``fs`` and
         ``rx`` updated.
 
     Returns
@@ -285,9 +285,5 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault=None):
     if bad >= 0:
         return bad
     # np.int64(0), not 0: a literal would compile a second advance_range besides the threads' (int64, int64)
-    args = (state, W, obs, outs, sig, ka, SF, SI, consts)
-    if fault is None:  # an omitted fault: advance_range's None specialisation
-        advance_range(np.int64(0), u.shape[0], u, args, None)
-    else:
-        advance_range(np.int64(0), u.shape[0], u, args, fault)
+    advance_range(np.int64(0), u.shape[0], u, (state, W, obs, outs, sig, ka, SF, SI, consts), fault)
     return -1

@@ -2,7 +2,7 @@
 the delivery gather and the C-O link.
 
 The faulted control period itself is :func:`dobs_envs.sim.period_kernel.advance_rows` with a
-:class:`FaultPeriod` instead of ``None`` (one engine: the same Euler steps, stable-step test and split
+:class:`FaultPeriod` instead of :data:`NO_FAULT` (one engine: the same Euler steps, stable-step test and split
 steps, the O-O exchange the only difference, as in :mod:`.numpy_step`'s ``_IdealExchange`` /
 ``_FaultedExchange``). What is here:
 
@@ -35,7 +35,7 @@ import numpy as np
 from ..numba_cache import ensure_fresh
 from ..packing import compiled_unpack, pack
 from . import fault_rng as frng
-from .fault_state import FaultArgs, FaultState
+from .fault_state import NO_FAULT, FaultArgs, FaultState
 from .jit import njit as _njit
 from .jit import njit_inline as _njit_inline
 

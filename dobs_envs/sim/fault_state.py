@@ -37,8 +37,16 @@ from ..packing import b1, f64, i64
 from . import fault_rng as rng
 from .faults import Faults
 
-__all__ = ["FaultArgs", "FaultState", "fault_args", "init_fault_state", "period_draws", "oo_losses",
+__all__ = ["NO_FAULT", "FaultArgs", "FaultState", "fault_args", "init_fault_state", "period_draws", "oo_losses",
            "faulted_outputs", "faulted_estimates", "co_link_numpy"]
+
+#: the ``fault`` argument of the compiled kernels on the ideal network: an empty tuple, not ``None``. The
+#: kernels branch on ``len(fault) == 0``, which numba turns into a constant before typing for any tuple
+#: argument (its ``RewriteSemanticConstants`` pass) and then prunes: each specialisation compiles only its
+#: own network's code. ``if fault is None:`` is pruned only where the argument *is* None: a specialisation
+#: for a fault tuple kept the ideal branches, compiled the whole ideal engine beside the faulted one (a
+#: faulted environment's cold compile 2x longer) and typed the work arrays ``ft``/``fsc`` as optionals.
+NO_FAULT = ()
 
 
 class FaultArgs(NamedTuple):

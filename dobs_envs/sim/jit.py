@@ -6,7 +6,9 @@
 either way), not ``nnan``/``ninf`` (NaN and inf propagate as IEEE arithmetic says: an overflowing
 observer yields a non-finite state the environment detects and terminates on, instead of undefined
 behaviour). ``njit`` / ``njit_inline``: cached, GIL-free, numpy error model (``njit_inline``: inlined
-into its callers at the IR level, where ``if arg is None:`` branches are pruned per specialisation).
+into its callers at the IR level, where ``if arg is None:`` branches are pruned per specialisation when
+the argument is None; ``len(tuple_arg)`` is made a constant only in a compiled function's own body, not in
+an inlined one: see ``period_kernel._tile_body``'s ``nf``).
 """
 from __future__ import annotations
 

@@ -1,15 +1,18 @@
 """numba-compiled control period: the hot path of every environment, with or without communication faults.
 
 Same operations as :func:`.numpy_step.control_period_numpy` (see its docstring for
-the equations) and, given a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` instead of ``None``,
+the equations) and, given a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` instead of
+:data:`~dobs_envs.sim.fault_state.NO_FAULT`,
 :func:`.numpy_step.control_period_faulted_numpy`; tested against both.
 
 One engine
 ----------
-Every compiled function of a period takes the fault arguments or ``None`` (``fault``, and its work
-arrays ``fsc`` / ``ft``). numba compiles one specialisation per argument type and prunes the
-``if fault is None:`` branches before typing, so ``faults=None`` compiles to the ideal network's code
-and runs no fault code. The two specialisations differ where the numpy reference's exchange objects
+Every compiled function of a period takes the fault arguments or
+:data:`~dobs_envs.sim.fault_state.NO_FAULT`, an empty tuple (``fault``; its work arrays ``fsc`` / ``ft``
+are then None). numba compiles one specialisation per argument type, turns ``len(fault)`` into a constant
+and prunes the ``if len(fault) == 0:`` branches before typing, so ``faults=None`` compiles to the ideal
+network's code only and runs no fault code, and a faulted specialisation contains no ideal-network code
+(``if fault is None:`` would be pruned for a None argument only: a faulted network compiled both). The two specialisations differ where the numpy reference's exchange objects
 (``_IdealExchange`` / ``_FaultedExchange``) do: the degrees of the stable-step test (the active graph's),
 the held measurement noise added to ``y_i`` (eq. (localmeasure)), and the consensus term ``d_i`` of eq.
 (H_idefine): ``(L xhat)_i`` over the neighbour lists, or ``sum_{e: receiver e = i} a_e^g (xhat_i - r_e)``
@@ -105,7 +108,7 @@ import numpy as np
 from ..numba_cache import ensure_fresh
 from ..packing import compiled_unpack, pack
 from . import fault_kernel as fk
-from .fault_state import FaultArgs, FaultState
+from .fault_state import NO_FAULT, FaultArgs, FaultState
 from .jit import FASTMATH, HAVE_NUMBA
 from .jit import njit as _njit
 from .jit import njit_inline as _njit_inline
@@ -238,7 +241,8 @@ def period_copy(b, pa, ka, sc, fault, fsc):
     """One control period of copy ``b`` in place (batch-first :class:`PeriodArrays` ``pa``, see module doc).
 
     ``ka`` the :class:`~dobs_envs.sim.kernel_args.KernelArgs`; ``sc`` the :class:`CopyScratch`;
-    ``fault`` None (the ideal network) or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with its
+    ``fault`` :data:`~dobs_envs.sim.fault_state.NO_FAULT` (the ideal network) or a
+    :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with its
     work arrays ``fsc`` (:class:`~dobs_envs.sim.fault_kernel.FaultCopyScratch`; None without faults):
     the copy's deliveries are written to ``fault.delivered[b]``, its received copies and snapshot ring
     updated, the period's draws read, not advanced (:func:`advance_rows` does). Every matrix-vector
@@ -255,7 +259,7 @@ def period_copy(b, pa, ka, sc, fault, fsc):
     N, n = pa.z.shape[1], pa.z.shape[2]
     p, mv = ka.C.shape[1], ka.B_v.shape[1]
     rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
-    if fault is None:
+    if len(fault) == 0:
         deg = ka.degree
     else:
         # the faulted O-O exchange (numpy_step._FaultedExchange): its arrays taken out of the bundles once
@@ -295,7 +299,7 @@ def period_copy(b, pa, ka, sc, fault, fsc):
             for q in range(N * p):
                 y[q] = 0.0
             _terms(y, rows.C, xb)
-            if fault is not None:
+            if len(fault) > 0:
                 if noisy:
                     for i in range(N):
                         for q in range(p):
@@ -303,7 +307,7 @@ def period_copy(b, pa, ka, sc, fault, fsc):
             for q in range(N * n):
                 xhat[q] = zb[q]
             _terms(xhat, rows.G_bar, y)
-            if fault is None:
+            if len(fault) == 0:
                 # d_i = sum_j a_ij (xhat_i - xhat_j) over the neighbour lists (sparse L xhat)
                 for i in range(N):
                     for k in range(n):
@@ -465,7 +469,7 @@ def period_tile(ts, ka, wk, W, fault, ft, lo):
     :func:`period_tile_any`.
     """
     numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
-    _tile_body(ts, ka, wk, W, fault, ft, lo)
+    _tile_body(ts, ka, wk, W, fault, ft, lo, len(fault))
 
 
 @_njit
@@ -473,20 +477,22 @@ def period_tile_any(ts, ka, wk, W, fault, ft, lo):
     """:func:`period_tile` with the width ``W`` known at run time only (one compilation for every
     width; the loops over the copies are vectorised with run-time trip counts). The same
     arithmetic per copy: results are bitwise those of :func:`period_tile` and :func:`period_copy`."""
-    _tile_body(ts, ka, wk, W, fault, ft, lo)
+    _tile_body(ts, ka, wk, W, fault, ft, lo, len(fault))
 
 
 @_njit_inline
-def _tile_body(ts, ka, wk, W, fault, ft, lo):
+def _tile_body(ts, ka, wk, W, fault, ft, lo, nf):
     """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place.
 
     ``ts`` the :class:`TileState` (``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``,
     ``XR (n, W)``, ``U``/``R (m, W)``, arrays at least ``W`` wide), ``wk`` the :class:`TileWork`;
-    ``fault`` None or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with the tile's fault arrays
+    ``fault`` NO_FAULT or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with the tile's fault arrays
     ``ft`` (:class:`~dobs_envs.sim.fault_kernel.FaultTile`). Per copy the same operations in the same
     order as :func:`period_copy`; the innermost loops run over the copies (SIMD), each pass over the
     copies adding up to four terms. Inlined into :func:`period_tile` (``W`` constant) and
-    :func:`period_tile_any` (``W`` at run time).
+    :func:`period_tile_any` (``W`` at run time). ``nf = len(fault)``, computed by the caller, where numba
+    makes it a constant (``len`` of a tuple argument; in an inlined body it would stay a call): the
+    branches on ``nf`` are pruned per specialisation (:data:`~dobs_envs.sim.fault_state.NO_FAULT`).
     """
     rows = ka.rows
     proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
@@ -498,7 +504,7 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
     N, n = Z.shape[0], Z.shape[1]
     p, mv = ka.C.shape[1], ka.B_v.shape[1]
     rq, maxdeg = ka.Q_proj.shape[2], nbr_idx.shape[1]
-    if fault is None:
+    if nf == 0:
         for c in range(W):
             FL[c] = 0.0
     else:
@@ -527,13 +533,13 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
         for i in range(N):
             for q in range(p):
                 _tile_dot(Y[i, q], None, rows.C, i * p + q, X, W)
-                if fault is not None:
+                if nf > 0:
                     if noisy:
                         for c in range(W):
                             Y[i, q, c] = Y[i, q, c] + NZ[i, q, c]
             for k in range(n):
                 _tile_dot(XH[i, k], Z[i, k], rows.G_bar, i * n + k, Y[i], W)
-        if fault is None:
+        if nf == 0:
             for i in range(N):
                 dg = deg[i]
                 for k in range(n):
@@ -648,7 +654,7 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
                 coef[c] = G[i, c] + (GS[i, c] / nw[c] if nw[c] > 0.0 else 0.0)
             # the stability test of period_copy (with a margin): a lane whose Euler step would be
             # split is flagged and recomputed copy by copy (advance_rows)
-            if fault is None:
+            if nf == 0:
                 dgi, phi_i = deg[i], phi[i]
                 for c in range(W):
                     if _crit(dgi, dt, G[i, c], phi_i, nw2[c]) > TILE_RECHECK:
@@ -768,7 +774,7 @@ def _scatter(ts, wk, ft, lo, nl, pa, ka, sc, fault, fsc):
                 z[b, i, k] = Z[i, k, c]
         for j in range(V.shape[0]):
             v[b, j] = V[j, c]
-        if fault is not None:
+        if len(fault) > 0:
             fk.scatter_lane(ft, c, b, fault)
 
 
@@ -782,20 +788,20 @@ def advance_rows(pa, ka, lo, hi, fault):
     disjoint ranges concurrently (no GIL)."""
     N, n, p = pa.z.shape[1], pa.z.shape[2], ka.C.shape[1]
     sc = _scratch_copy(ka)
-    if fault is None:
+    if len(fault) == 0:
         fsc = None
     else:
         fsc = fk.scratch_copy(fault.args, N)
     b = lo
     if hi - b >= TILE:
         ts, wk = _scratch_tile(ka, TILE)
-        if fault is None:
+        if len(fault) == 0:
             ft = None
         else:
             ft = fk.scratch_tile(fault.args, N, n, p, TILE)
         while hi - b >= TILE:
             _gather(ts, b, TILE, pa)
-            if fault is not None:
+            if len(fault) > 0:
                 fk.gather_tile(ft, b, TILE, fault)
             period_tile(ts, ka, wk, TILE, fault, ft, b)
             _scatter(ts, wk, ft, b, TILE, pa, ka, sc, fault, fsc)
@@ -803,19 +809,19 @@ def advance_rows(pa, ka, lo, hi, fault):
     if hi - b >= MIN_TILE:
         nl = hi - b
         ts, wk = _scratch_tile(ka, nl)
-        if fault is None:
+        if len(fault) == 0:
             ft = None
         else:
             ft = fk.scratch_tile(fault.args, N, n, p, nl)
         _gather(ts, b, nl, pa)
-        if fault is not None:
+        if len(fault) > 0:
             fk.gather_tile(ft, b, nl, fault)
         period_tile_any(ts, ka, wk, nl, fault, ft, b)
         _scatter(ts, wk, ft, b, nl, pa, ka, sc, fault, fsc)
         b = hi
     for c in range(b, hi):
         period_copy(c, pa, ka, sc, fault, fsc)
-    if fault is not None:
+    if len(fault) > 0:
         fk.draws_rows(lo, hi, fault.args, fault.state)
 
 
@@ -845,8 +851,8 @@ def _control_period(x, z, gamma, gamma_s, v, x_r, u, r, kp, fault):
     x_r = x_r.copy()
     KF, KI = kp
     pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
-    if fault is None:
-        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], None)
+    if len(fault) == 0:
+        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], fault)
     else:
         FF, FI, fs, delivered = fault
         advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], fault_period(FF, FI, fs, delivered))
@@ -863,7 +869,7 @@ def control_period_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p):
         u = np.ascontiguousarray(u, dtype=np.float64)
     if r.dtype != np.float64 or not r.flags.c_contiguous:
         r = np.ascontiguousarray(r, dtype=np.float64)
-    return _control_period(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_packed, None)
+    return _control_period(x, z, gamma, gamma_s, v, x_r, u, r, p.kernel_packed, NO_FAULT)
 
 
 def control_period_faulted_compiled(x, z, gamma, gamma_s, v, x_r, u, r, p, fa, fs, *, delivered=None):
