@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -35,14 +36,19 @@ __all__ = ["train_jax_marl", "shared_export", "MARL_ALGOS"]
 MARL_ALGOS = ("ppo",)
 
 
+class _Bounds(NamedTuple):
+    low: np.ndarray
+    high: np.ndarray
+
+
 class _PolicySpace:
     """The slots' action space as :func:`.export.save_policy` reads an env's (``num_actions``, ``action_space``)."""
 
     def __init__(self, low, high):
         self.num_actions = int(np.asarray(low).shape[0])
-        self._space = type("Box", (), {"low": np.asarray(low, np.float32), "high": np.asarray(high, np.float32)})
+        self._space = _Bounds(np.asarray(low, np.float32), np.asarray(high, np.float32))
 
-    def action_space(self, params=None):
+    def action_space(self, params=None) -> _Bounds:
         return self._space
 
 
