@@ -1,4 +1,4 @@
-"""The jitted shared-policy PPO (``train --trainer jax --multi-agent``) beside SB3's (``train --multi-agent``) on tracking.
+"""The jitted shared-policy PPO (``train --trainer jax --multi-agent``) beside SB3's (``--multi-agent``) on tracking.
 
 Both train one policy shared by the five controller nodes with the shipped multi-agent recipe
 (``agents/config/hyperparams/ppo.yaml``: ``default-ma`` and ``tracking-ma`` over the tracking section), the same

@@ -258,3 +258,22 @@ def test_cli_run_is_scored_by_evaluate_on_the_pettingzoo_env(tmp_path, capsys):
     np.testing.assert_allclose(curve["points"][-1]["cost_ratio"], np.array(costs) / paper_costs("tracking", {},
                                                                                                  curve["seeds"]),
                                rtol=1e-12)
+
+
+@pytest.mark.parametrize("extra, names", [
+    (["--hyperparams", '{"target_kl": 0.02}'], ["target_kl", "multi-agent"]),
+    (["--hyperparams", '{"agent_id": 1}'], ["agent_id"]),
+    (["--hybrid", "residual"], ["--hybrid"]),
+])
+def test_multi_agent_usage_errors_exit_2_before_out_is_touched(extra, names, tmp_path, capsys):
+    from dobs_envs.cli import main
+
+    out = tmp_path / "never"
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--trainer", "jax", "--multi-agent", "--timesteps", "64", "--no-progress", "--out", str(out),
+              *extra])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and err.count("\n") == 0 and "Traceback" not in err, err
+    for n in names:
+        assert n in err, err
+    assert not out.exists()

@@ -39,7 +39,8 @@ def _check_out_dir(path: str | None, option: str) -> None:
 #: ``train --trainer``: sb3 (Stable-Baselines3 / SBX, agents.training.train) or jax (agents.training.jax.run)
 TRAINERS = ("sb3", "jax")
 #: train options the jitted trainer does not take (argparse dest, option, whether it was given)
-_NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("hybrid", "--hybrid", lambda v: v is not None), ("tensorboard", "--tensorboard", lambda v: v is not None),
+_NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("hybrid", "--hybrid", lambda v: v is not None),
+            ("tensorboard", "--tensorboard", lambda v: v is not None),
             ("checkpoint_freq", "--checkpoint-freq", lambda v: v is not None),
             ("allow_custom_env", "--allow-custom-env", bool), ("verbose", "--verbose", bool))
 _JAX_OPTIONS = ("--algo ppo, --multi-agent, --env, --timesteps, --seed, --out, --hyperparams, --recipe, --threads, "

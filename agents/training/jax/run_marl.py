@@ -9,7 +9,8 @@ writes, with the multi-agent fields of an SB3 shared run:
   :class:`.numpy_policy.NumpyPolicy` on the slot observations, its output the slot's action in the policy's space,
   ``[-1, 1]`` with ``normalize_actions``); ``policy.json``'s ``extra.multi_agent`` records the agents, ``agent_id``
   and ``rescale_actions``. On the PettingZoo env the policy acts through :class:`agents.vecenv.slots.SlotEncoder`
-  (padding, one-hot id, each agent's bounds) as an SB3 shared run does (:class:`agents.training.loading.JaxTrainedAgent`);
+  (padding, one-hot id, each agent's bounds) as an SB3 shared run does
+  (:class:`agents.training.loading.JaxTrainedAgent`);
 - ``curve.json`` (J / J_paper of the snapshots on the curve episodes of the tuning range, on the compiled PettingZoo
   env), ``train_curve.json`` (per update; ``episodes``: copies' episodes), ``config.json`` (``multi_agent: true``,
   ``n_agents``, ``agent_id``, ``normalize_actions``, ``rollout`` in env steps, ``samples_per_update``; the rest as
