@@ -107,7 +107,6 @@ def test_evaluate_scores_the_jitted_run_with_the_harness(jax_run, tmp_path, caps
 
 @pytest.mark.parametrize("extra, names", [
     (["--algo", "sac"], ["--algo", "ppo"]),
-    (["--multi-agent"], ["--multi-agent"]),
     (["--hybrid", "residual"], ["--hybrid"]),
     (["--resume", "runs/x"], ["--resume"]),
     (["--checkpoint-freq", "0"], ["--checkpoint-freq"]),

@@ -39,12 +39,12 @@ def _check_out_dir(path: str | None, option: str) -> None:
 #: ``train --trainer``: sb3 (Stable-Baselines3 / SBX, agents.training.train) or jax (agents.training.jax.run)
 TRAINERS = ("sb3", "jax")
 #: train options the jitted trainer does not take (argparse dest, option, whether it was given)
-_NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("multi_agent", "--multi-agent", bool),
-            ("hybrid", "--hybrid", lambda v: v is not None), ("tensorboard", "--tensorboard", lambda v: v is not None),
+_NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("hybrid", "--hybrid", lambda v: v is not None),
+            ("tensorboard", "--tensorboard", lambda v: v is not None),
             ("checkpoint_freq", "--checkpoint-freq", lambda v: v is not None),
             ("allow_custom_env", "--allow-custom-env", bool), ("verbose", "--verbose", bool))
-_JAX_OPTIONS = ("--algo ppo, --env, --timesteps, --seed, --out, --hyperparams, --recipe, --threads, --overwrite, "
-                "--no-progress")
+_JAX_OPTIONS = ("--algo ppo, --multi-agent, --env, --timesteps, --seed, --out, --hyperparams, --recipe, --threads, "
+                "--overwrite, --no-progress")
 
 #: the options that define a run (argparse dest, option, config.json key); --resume checks them
 _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_agent", "--multi-agent", "multi_agent"),
@@ -144,8 +144,8 @@ def _new_run_env(args) -> str:
 
 
 def _train_jax(args) -> int:
-    """``train --trainer jax``: the jitted trainer (:func:`agents.training.jax.run.train_jax`); the SB3-only
-    options are usage errors."""
+    """``train --trainer jax``: the jitted trainer (:func:`agents.training.jax.run.train_jax`; with --multi-agent the
+    shared policy, :func:`agents.training.jax.run_marl.train_jax_marl`); the SB3-only options are usage errors."""
     from ..config.hyperparam_files import HyperparamsError
     from ..training.jax import ALGOS
     from ..training.runs import default_run_dir
@@ -164,10 +164,12 @@ def _train_jax(args) -> int:
         env = jax_env(env)[0]
     except JaxRunError as exc:
         _usage_error(str(exc))
-    out = args.out or default_run_dir(env, f"{args.algo}_jax", False, args.seed)
+    out = args.out or default_run_dir(env, f"{args.algo}_jax", args.multi_agent, args.seed)
     _check_out_dir(out, "--out")
     if os.path.isdir(out) and os.listdir(out) and not args.overwrite:
         _usage_error(_occupied_run_dir(out))
+    if args.multi_agent:
+        from ..training.jax.run_marl import train_jax_marl as train_jax
     try:
         res = train_jax(env, args.algo, timesteps=args.timesteps, seed=args.seed, out=out,
                         hyperparams=args.hyperparams, threads=args.threads, progress=not args.no_progress)
@@ -176,8 +178,8 @@ def _train_jax(args) -> int:
     except KeyboardInterrupt as exc:
         _interrupted(out, exc)
     c = res.config
-    print(f"trained {c['algo']} (jax) on {c['env']}: {c['timesteps_done']} env steps in {c['train_seconds']:.1f} s "
-          f"(compiled in {c['compile_seconds']:.1f} s) -> {res.path}")
+    print(f"trained {c['algo']} (jax{', shared' if c['multi_agent'] else ''}) on {c['env']}: {c['timesteps_done']} env "
+          f"steps in {c['train_seconds']:.1f} s (compiled in {c['compile_seconds']:.1f} s) -> {res.path}")
     return 0
 
 

@@ -24,7 +24,7 @@ from .algos import BackendUnavailable, backend_of
 from .run_pickles import load_vecnormalize
 from .runs import RunDirError, load_or_refuse, run_files
 
-__all__ = ["TrainedAgent", "JaxTrainedAgent", "load_agent", "evaluate_model"]
+__all__ = ["TrainedAgent", "JaxTrainedAgent", "load_agent", "evaluate_model", "slot_policy"]
 
 
 class TrainedAgent:
@@ -138,21 +138,29 @@ class TrainedAgent:
         return enc
 
     def parallel_policy(self, env, deterministic: bool = True) -> Callable:
-        enc = self.encoder_for(env)
+        return slot_policy(self.encoder_for(env), lambda obs: self.predict(obs, deterministic))
 
-        def policy(observations: dict) -> dict:
-            acts = self.predict(enc.encode_all(observations), deterministic)
-            return {a: act for a, act in enc.decode_all(acts).items() if a in observations}
 
-        return policy
+def slot_policy(encoder: SlotEncoder, act: Callable) -> Callable:
+    """``{agent: obs} -> {agent: action}`` of a shared policy ``act`` (``(K, width) -> (K, act_dim)`` on the slot
+    observations) through ``encoder`` (padding, one-hot id, each agent's bounds); agents absent from the
+    observations get no action."""
+
+    def policy(observations: dict) -> dict:
+        acts = act(encoder.encode_all(observations))
+        return {a: u for a, u in encoder.decode_all(acts).items() if a in observations}
+
+    return policy
 
 
 class JaxTrainedAgent:
-    """A jitted run loaded for evaluation (centralised): ``policy_for(env)`` is its
+    """A jitted run loaded for evaluation: ``policy_for(env)`` is its
     :class:`agents.training.jax.numpy_policy.NumpyPolicy` (``obs -> input`` of the task's Gymnasium env, its
-    default ``normalized_actions=False``); ``name`` ``"PPO (JAX)"``."""
+    default ``normalized_actions=False``); ``name`` ``"PPO (JAX)"``. A shared-policy run (``config.json``
+    ``multi_agent``, :mod:`agents.training.jax.run_marl`) acts on the PettingZoo env through
+    :class:`agents.vecenv.slots.SlotEncoder` as an SB3 shared run does (the run's ``agent_id`` and
+    ``normalize_actions``); ``name`` ``"PPO (JAX, shared)"``."""
 
-    multi_agent = False
     hybrid = None
 
     def __init__(self, path: str, config: dict):
@@ -161,6 +169,7 @@ class JaxTrainedAgent:
         from .jax.numpy_policy import NumpyPolicy
 
         self.path, self.config, self.algo = path, config, config["algo"]
+        self.multi_agent = bool(config.get("multi_agent"))
         self.model_path = os.path.join(path, "policy.npz")
         # arrays read with allow_pickle=False; a damaged or refused file is a RunDirError naming it
         self.policy = load_or_refuse(self.model_path, lambda: NumpyPolicy(path))
@@ -170,12 +179,21 @@ class JaxTrainedAgent:
 
     @property
     def name(self) -> str:
-        return f"{self.algo.upper()} (JAX)"
+        return f"{self.algo.upper()} (JAX{', shared' if self.multi_agent else ''})"
 
     def policy_for(self, env, deterministic: bool = True) -> Callable:
         """The exported deterministic policy (``deterministic`` must be True: no stochastic policy is exported)."""
         if not deterministic:
             raise ValueError("a jitted run exports its deterministic policy only")
+        if self.multi_agent:
+            agents = list(env.possible_agents)
+            enc = SlotEncoder(agents, {a: env.observation_space(a) for a in agents},
+                              {a: env.action_space(a) for a in agents}, agent_id=bool(self.config.get("agent_id")),
+                              rescale_actions=bool(self.config.get("normalize_actions")))
+            if enc.observation_space.shape != (self.policy.obs_dim,):
+                raise ValueError(f"the exported policy expects slot observations of shape ({self.policy.obs_dim},), "
+                                 f"the env gives {enc.observation_space.shape}")
+            return slot_policy(enc, self.policy)
         shape = getattr(env.observation_space, "shape", None)
         if shape != (self.policy.obs_dim,):
             raise ValueError(f"the exported policy expects observations of shape ({self.policy.obs_dim},), the env "

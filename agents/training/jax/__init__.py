@@ -7,7 +7,10 @@
 - :mod:`.policy`: SB3's MlpPolicy actor-critic in JAX;
 - :mod:`.export`: a trained policy written as ``policy.npz`` + ``policy.json``;
 - :mod:`.numpy_policy`: the plain numpy callable that loads it (numpy only: acting needs no JAX);
-- :mod:`.run`: ``dobs-envs train --trainer jax``: a run directory of a jitted run (:func:`~.run.train_jax`).
+- :mod:`.run`: ``dobs-envs train --trainer jax``: a run directory of a jitted run (:func:`~.run.train_jax`);
+- :mod:`.ippo`: PPO with one policy shared by the controller nodes on the multi-agent view (IPPO, parameter
+  sharing: :func:`~.ippo.make_train` over :mod:`.ppo`'s trainer, one slot per (copy, agent));
+- :mod:`.run_marl`: ``dobs-envs train --trainer jax --multi-agent`` (:func:`~.run_marl.train_jax_marl`).
 
 Importing this package imports nothing heavy; the names below load their module on first use.
 """
@@ -24,7 +27,8 @@ POLICY_FILES = ("policy.npz", "policy.json")
 
 _LAZY = {"HPARAMS": "ppo", "PPOConfig": "ppo", "make_env": "ppo", "make_train": "ppo", "ppo_config": "ppo",
          "save_policy": "export", "jax_act": "export", "select_run": "export", "policy_arrays": "export",
-         "NumpyPolicy": "numpy_policy", "train_jax": "run"}
+         "NumpyPolicy": "numpy_policy", "train_jax": "run", "IPPOConfig": "ippo", "ippo_config": "ippo",
+         "train_jax_marl": "run_marl"}
 
 __all__ = sorted(_LAZY) + ["TRAINER", "LIBRARY", "ALGOS", "POLICY_FILES"]
 

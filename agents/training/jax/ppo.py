@@ -43,6 +43,7 @@ The hyperparameters are the recipe's keys (the merged section of ``agents/hyperp
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -52,7 +53,7 @@ import optax
 from . import normalize as nz
 from . import policy as pol
 
-__all__ = ["PPOConfig", "HPARAMS", "ppo_config", "make_env", "make_train"]
+__all__ = ["PPOConfig", "HPARAMS", "ppo_config", "make_env", "make_train", "VecSlots", "gymnax_slots"]
 
 #: float hyperparameters passed to ``train(key, hparams)``: traced, so ``jax.vmap`` sweeps them
 HPARAMS = ("learning_rate", "clip_range", "gamma", "gae_lambda", "ent_coef", "vf_coef", "max_grad_norm",
@@ -219,7 +220,48 @@ def _clip_by_global_norm(grads, max_norm):
     return jax.tree.map(lambda g: g * scale, grads)
 
 
-def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
+class VecSlots(NamedTuple):
+    """The vectorised environment a run steps, as the trainer sees it: ``n_slots`` samples per vector step
+    (the policy's batch) from ``copies`` environment copies (``n_slots = copies``: the centralised env, one
+    slot per copy; :mod:`agents.training.jax.ippo`: one slot per (copy, agent), ``n_slots = copies * K``).
+
+    ``reset(key) -> (obs (N, D), state)``; ``step(key, state, action (N, m)) -> (obs (N, D), state,
+    reward (N,), terminated (N,), truncated (N,), final_obs (N, D))`` with auto-reset (``obs``: the next
+    episode's first observation where an episode ended, ``final_obs`` its last one); ``action`` already
+    clipped to ``[low, high]`` (the policy's action space). Budgets, schedules and the curve's ``steps``
+    count environment steps: ``copies`` per vector step, whatever ``n_slots``."""
+    n_slots: int
+    copies: int
+    obs_dim: int
+    act_dim: int
+    low: Any
+    high: Any
+    reset: Callable
+    step: Callable
+
+
+def gymnax_slots(env, env_params, n_envs: int) -> VecSlots:
+    """:class:`VecSlots` of ``n_envs`` vmapped copies of a gymnax-style env (:func:`dobs_envs.jax.make`): one slot
+    per copy, the action space's bounds, ``info["final_observation"]``."""
+    obs_dim = int(np.prod(env.observation_space(env_params).shape))
+    act_dim = int(env.num_actions)
+    space = env.action_space(env_params)
+    low = jnp.asarray(np.broadcast_to(np.asarray(space.low, np.float32), (act_dim,)))
+    high = jnp.asarray(np.broadcast_to(np.asarray(space.high, np.float32), (act_dim,)))
+    v_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
+    v_reset = jax.vmap(env.reset, in_axes=(0, None))
+
+    def reset(key):
+        return v_reset(jax.random.split(key, n_envs), env_params)
+
+    def step(key, state, action):
+        obs, state, reward, term, trunc, info = v_step(jax.random.split(key, n_envs), state, action, env_params)
+        return obs, state, reward, term, trunc, info["final_observation"]
+
+    return VecSlots(n_envs, n_envs, obs_dim, act_dim, low, high, reset, step)
+
+
+def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None, *, slots: VecSlots | None = None):
     """``train(key, hparams) -> dict``: one PPO run as a pure function (``jax.jit`` / ``jax.vmap`` it).
 
     Parameters
@@ -229,6 +271,9 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
     snapshots : update counts in ``0 .. cfg.n_updates`` (0: the initial policy) after which the
         actor and the observation statistics are kept (a learning curve evaluated after the run, as
         :mod:`agents.training.jax.run` does); default none.
+    slots : the vectorised environment as :class:`VecSlots` (default :func:`gymnax_slots` of ``env``: one slot per
+        copy); :mod:`agents.training.jax.ippo` passes one slot per (copy, agent) of the multi-agent view.
+        ``batch_size`` must divide ``n_slots * n_steps``.
 
     Returns
     -------
@@ -240,25 +285,25 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
           statistics at the end (what :mod:`agents.training.jax.export` needs: the observation part);
         - ``curve``: per update ``steps (U,)`` (env steps after its rollout), ``episode_return (U,)`` and
           ``episode_length (U,)`` (means over the episodes that ended in that rollout, NaN if none:
-          the raw rewards, as SB3's ``Monitor``), ``episodes (U,)`` (their count), ``approx_kl (U,)``,
+          the raw rewards, as SB3's ``Monitor``), ``episodes (U,)`` (their count, one per slot), ``approx_kl (U,)``,
           ``value_loss (U,)`` (means over the update's minibatches);
         - ``snapshots`` (with ``snapshots``, K of them in increasing order): the actor's arrays ``pi_*``
           ``(K, ...)``, ``obs_mean (K, D)`` and ``obs_var (K, D)`` after those updates.
     """
-    if env is None:
-        env, env_params = make_env(cfg)
-    elif env_params is None:
-        env_params = env.default_params
-    B, T = cfg.n_envs, cfg.n_steps
-    obs_dim = int(np.prod(env.observation_space(env_params).shape))
-    act_dim = int(env.num_actions)
-    space = env.action_space(env_params)
-    a_low = jnp.asarray(np.broadcast_to(np.asarray(space.low, np.float32), (act_dim,)))
-    a_high = jnp.asarray(np.broadcast_to(np.asarray(space.high, np.float32), (act_dim,)))
+    if slots is None:
+        if env is None:
+            env, env_params = make_env(cfg)
+        elif env_params is None:
+            env_params = env.default_params
+        slots = gymnax_slots(env, env_params, cfg.n_envs)
+    N, T = slots.n_slots, cfg.n_steps
+    obs_dim, act_dim, a_low, a_high = slots.obs_dim, slots.act_dim, slots.low, slots.high
     stat_dtype = jnp.float64 if cfg.dtype == "float64" else jnp.float32
-    n_mb, n_samples, total = cfg.n_minibatches, B * T, float(cfg.total_timesteps)
-    v_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
-    v_reset = jax.vmap(env.reset, in_axes=(0, None))
+    n_samples, total = N * T, float(cfg.total_timesteps)
+    if n_samples % cfg.batch_size:
+        raise ValueError(f"batch_size {cfg.batch_size} must divide the rollout's {n_samples} samples (equal "
+                         f"minibatches)")
+    n_mb, env_steps = n_samples // cfg.batch_size, slots.copies * T  # env steps per update
     adam = optax.scale_by_adam(eps=1e-5)
     act_fn = cfg.activation
     snap_at = None
@@ -282,15 +327,15 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
         k_init, k_reset, key = jax.random.split(key, 3)
         params = pol.init_params(k_init, obs_dim, act_dim, cfg.net_arch, hp["log_std_init"])
         opt_state = adam.init(params)
-        obs, env_state = v_reset(jax.random.split(k_reset, B), env_params)
-        norm = nz.norm_init((obs_dim,), B, stat_dtype)
+        obs, env_state = slots.reset(k_reset)
+        norm = nz.norm_init((obs_dim,), N, stat_dtype)
         if cfg.norm_obs:  # VecNormalize.reset updates the statistics with the first observations
             norm = norm._replace(obs_rms=nz.rms_update(norm.obs_rms, obs))
             obs_n = nz.normalize_obs(norm.obs_rms, obs, hp["clip_obs"], hp["norm_epsilon"])
         else:
             obs_n = obs
         obs_n = obs_n.astype(jnp.float32)
-        zeros = jnp.zeros((B,), stat_dtype)
+        zeros = jnp.zeros((N,), stat_dtype)
 
         def env_step(carry, k):
             params, norm, env_state, obs_n, ep_ret, ep_len = carry
@@ -299,14 +344,12 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
             action = mean + jnp.exp(params["log_std"]) * jax.random.normal(k_act, mean.shape, jnp.float32)
             logp = pol.log_prob(params, mean, action)
             v = pol.value(params, obs_n, act_fn)
-            obs, env_state, reward, term, trunc, info = v_step(
-                jax.random.split(k_env, B), env_state, jnp.clip(action, a_low, a_high), env_params)
+            obs, env_state, reward, term, trunc, final = slots.step(k_env, env_state, jnp.clip(action, a_low, a_high))
             done = term | trunc
             norm, next_obs_n, rew_n = nz.norm_step(
                 norm, obs, reward, done, gamma=hp["norm_gamma"], clip_obs=hp["clip_obs"],
                 clip_reward=hp["clip_reward"], epsilon=hp["norm_epsilon"], norm_obs=cfg.norm_obs,
                 norm_reward=cfg.norm_reward)
-            final = info["final_observation"]
             if cfg.norm_obs:
                 final = nz.normalize_obs(norm.obs_rms, final, hp["clip_obs"], hp["norm_epsilon"])
             v_final = pol.value(params, final.astype(jnp.float32), act_fn)
@@ -351,7 +394,7 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
 
             _, adv_t = jax.lax.scan(gae, (jnp.zeros_like(last_v), last_v), (rew_t, v_t, done_t), reverse=True)
             data = tuple(x.reshape((n_samples,) + x.shape[2:]) for x in (obs_t, act_t, logp_t, adv_t, adv_t + v_t))
-            progress = 1.0 - (u + 1.0) * n_samples / total  # SB3's progress_remaining after the rollout
+            progress = 1.0 - (u + 1.0) * env_steps / total  # SB3's progress_remaining after the rollout
             lr = hp["learning_rate"] * (progress if cfg.lr_linear else 1.0)
             clip_eps = hp["clip_range"] * (progress if cfg.clip_linear else 1.0)
 
@@ -372,13 +415,13 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None):
                                                              jax.random.split(k_perm, cfg.n_epochs))
             n_ep, ret_sum, len_sum = (jnp.sum(x) for x in ended)
             has = n_ep > 0
-            curve = {"steps": (u + 1) * n_samples,
+            curve = {"steps": (u + 1) * env_steps,
                      "episode_return": jnp.where(has, ret_sum / jnp.maximum(n_ep, 1), jnp.nan),
                      "episode_length": jnp.where(has, len_sum / jnp.maximum(n_ep, 1), jnp.nan),
                      "episodes": n_ep, "approx_kl": kl.mean(), "value_loss": v_loss.mean()}
             return (params, opt_state, norm, env_state, obs_n, ep_ret, ep_len, key), curve
 
-        carry = (params, opt_state, norm, env_state, obs_n, zeros, jnp.zeros((B,), jnp.int32), key)
+        carry = (params, opt_state, norm, env_state, obs_n, zeros, jnp.zeros((N,), jnp.int32), key)
         if snap_at is None:
             carry, curve = jax.lax.scan(update, carry, jnp.arange(cfg.n_updates))
         else:
