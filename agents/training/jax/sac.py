@@ -47,7 +47,8 @@ project's SAC rows train with, :mod:`agents.training.algos`) driven by SB3's ``O
 Deliberate differences from SBX (and SB3's loop):
 
 - random streams: JAX keys split per collect and gradient step (SBX's key stream and NumPy's buffer
-  sampling differ; the distributions are the same);
+  sampling differ; the distributions are the same); given the same key, a Gaussian draw is SBX's
+  (:func:`standard_normal`), so one gradient step from the same state, batch and keys is SBX's (tested);
 - the final observation is stored raw; SB3 stores ``unnormalize_obs(normalize_obs(o_final))``, which equals
   ``o_final`` except where ``clip_obs`` clipped it;
 - the buffer is float32 for observations and rewards (SB3's: the observation space's dtype, float32 here,
@@ -83,8 +84,8 @@ from .policy import ACTIVATIONS
 from .ppo import _pos_int, _schedule
 
 __all__ = ["SACConfig", "HPARAMS", "RECIPE_KEYS", "sac_config", "make_env", "make_train", "init_params",
-           "actor_dist", "tanh_log_prob", "q_values", "critic_loss", "actor_loss", "alpha_loss", "polyak",
-           "ring_init", "ring_write", "sample_indices"]
+           "actor_dist", "tanh_log_prob", "standard_normal", "q_values", "critic_loss", "actor_loss", "alpha_loss", "polyak",
+           "init_opts", "update_step", "ring_init", "ring_write", "sample_indices"]
 
 #: float hyperparameters passed to ``train(key, hparams)``: traced, so ``jax.vmap`` sweeps them
 HPARAMS = ("learning_rate", "tau", "gamma", "ent_coef", "target_entropy", "norm_gamma", "clip_obs", "clip_reward",
@@ -320,10 +321,18 @@ def tanh_log_prob(mu, log_std, x):
     return jnp.sum(gauss - 2.0 * (math.log(2.0) - x - jax.nn.softplus(-2.0 * x)), axis=-1)
 
 
+def standard_normal(key, shape: tuple):
+    """``N(0, 1)`` draws of ``shape (n, m)`` in the order of SBX's ``dist.sample(seed=key)`` (TFP's
+    ``MultivariateNormalDiag`` draws ``(m, n)`` with ``jax.random.normal`` and transposes): the same key gives
+    the same exploration noise as SBX."""
+    return jax.random.normal(key, shape[::-1], jnp.float32).T
+
+
 def _sample(params, obs, activation, key):
-    """``(a, log pi(a))`` with ``a = tanh(mu + sigma eps)``, fresh ``eps`` drawn with ``key``."""
+    """``(a, log pi(a))`` with ``a = tanh(mu + sigma eps)``, ``eps`` drawn with ``key`` (:func:`standard_normal`);
+    ``obs (n, D)``."""
     mu, log_std = actor_dist(params, obs, activation)
-    x = mu + jnp.exp(log_std) * jax.random.normal(key, mu.shape, jnp.float32)
+    x = mu + jnp.exp(log_std) * standard_normal(key, mu.shape)
     return jnp.tanh(x), tanh_log_prob(mu, log_std, x)
 
 
@@ -402,6 +411,44 @@ def ring_write(ring, row: dict):
     return buf, pos, full | (pos == 0)
 
 
+#: optax.adam's moments (b1 0.9, b2 0.999, eps 1e-8); the learning rate is applied by :func:`_adam_step`
+_ADAM = optax.scale_by_adam()
+
+
+def init_opts(params: dict, log_alpha):
+    """The Adam states ``(actor, critics, log alpha)`` of a new run."""
+    return _ADAM.init(_actor_params(params)), _ADAM.init(_critic_params(params)), _ADAM.init(log_alpha)
+
+
+def _adam_step(p, grads, opt, lr):
+    step, opt = _ADAM.update(grads, opt)
+    return jax.tree.map(lambda a, s: a - lr * s, p, step), opt
+
+
+def update_step(state, batch, keys, *, lr, lr_alpha, gamma, tau, target_entropy, activation: str,
+                ent_auto: bool = True):
+    """One SAC gradient step (SBX's ``update_critic``, ``soft_update``, ``update_actor``, ``update_temperature``).
+
+    ``state = (params, target, log_alpha, opts)`` (:func:`init_params`, the target critics, ``log alpha``,
+    :func:`init_opts`); ``batch = (obs, action, next_obs, reward, done)`` (normalised, ``done`` the
+    termination); ``keys = (k_critic, k_actor)`` draw the critic's next actions and the actor's actions.
+    Returns ``(state', (critic loss, actor loss, alpha))`` with ``alpha`` the coefficient the step used."""
+    params, target, log_alpha, (o_pi, o_qf, o_al) = state
+    k_q, k_pi = keys
+    alpha = jnp.exp(log_alpha)
+    actor, qf = _actor_params(params), _critic_params(params)
+    q_loss, g_qf = jax.value_and_grad(critic_loss)(qf, target, actor, alpha, batch, gamma, k_q, activation)
+    qf, o_qf = _adam_step(qf, g_qf, o_qf, lr)
+    target = polyak(qf, target, tau)
+    (pi_loss, entropy), g_pi = jax.value_and_grad(actor_loss, has_aux=True)(actor, qf, alpha, batch[0], k_pi,
+                                                                           activation)
+    actor, o_pi = _adam_step(actor, g_pi, o_pi, lr)
+    if ent_auto:
+        g_al = jax.grad(alpha_loss)(log_alpha, entropy, target_entropy)
+        log_alpha, o_al = _adam_step(log_alpha, g_al, o_al, lr_alpha)
+    return (dict(actor, **qf), target, log_alpha, (o_pi, o_qf, o_al)), (q_loss, pi_loss, alpha)
+
+
 def sample_indices(key, n: int, pos, full, rows: int, n_envs: int):
     """``(row, copy)`` of ``n`` transitions drawn uniformly from the filled part of the ring buffer (rows
     ``0 .. rows - 1`` when ``full``, else ``0 .. pos - 1``; SB3's ``ReplayBuffer.sample``)."""
@@ -451,7 +498,6 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
     total = float(cfg.total_timesteps)
     v_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
     v_reset = jax.vmap(env.reset, in_axes=(0, None))
-    adam = optax.scale_by_adam()  # optax.adam's moments (eps 1e-8); the learning rate applied below
     fn = cfg.activation
     snap_at = None
     if snapshots is not None:
@@ -468,10 +514,6 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         hit = jnp.asarray(snap_at)[slot] == count
         return jax.tree.map(lambda b, x: b.at[slot].set(jnp.where(hit, x.astype(b.dtype), b[slot])), buf, snap)
 
-    def adam_step(p, grads, opt, lr):
-        step, opt = adam.update(grads, opt)
-        return jax.tree.map(lambda a, s: a - lr * s, p, step), opt
-
     def train(key, hparams: dict):
         hp = {k: jnp.asarray(hparams[k]) for k in HPARAMS}
         target_entropy = jnp.where(jnp.isnan(hp["target_entropy"]), -float(act_dim), hp["target_entropy"])
@@ -479,7 +521,7 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         params = init_params(k_init, obs_dim, act_dim, cfg.net_arch)
         target = _critic_params(params)
         log_alpha = jnp.log(hp["ent_coef"]).astype(jnp.float32)
-        opts = (adam.init(_actor_params(params)), adam.init(target), adam.init(log_alpha))
+        opts = init_opts(params, log_alpha)
         obs, env_state = v_reset(jax.random.split(k_reset, B), env_params)
         norm = nz.norm_init((obs_dim,), B, stat_dtype)
         if cfg.norm_obs:  # VecNormalize.reset updates the statistics with the first observations
@@ -495,7 +537,7 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
             k, t = x
             k_act, k_rand, k_env = jax.random.split(k, 3)
             mu, log_std = actor_dist(params, obs_n, fn)
-            eps = eps_held if cfg.use_sde else jax.random.normal(k_act, mu.shape, f32)
+            eps = eps_held if cfg.use_sde else standard_normal(k_act, mu.shape)
             a = jnp.clip(jnp.tanh(mu + jnp.exp(log_std) * eps), -1.0, 1.0)
             random = jax.random.uniform(k_rand, mu.shape, f32, -1.0, 1.0)
             a = jnp.where(t * B < cfg.learning_starts, random, a)  # t: vector steps taken before this one
@@ -534,22 +576,10 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
                 rew_b = nz.normalize_reward(norm.ret_rms, rew_b, hp["clip_reward"], hp["norm_epsilon"]).astype(f32)
             data = (obs_b, take("action"), next_b, rew_b, take("done"))
 
-            def one(carry, x):
-                params, target, log_alpha, (o_pi, o_qf, o_al) = carry
+            def one(state, x):
                 batch, k = x
-                k_q, k_pi = jax.random.split(k)
-                alpha = jnp.exp(log_alpha)
-                actor, qf = _actor_params(params), _critic_params(params)
-                q_loss, g_qf = jax.value_and_grad(critic_loss)(qf, target, actor, alpha, batch, hp["gamma"], k_q, fn)
-                qf, o_qf = adam_step(qf, g_qf, o_qf, lr)
-                target = polyak(qf, target, hp["tau"])
-                (pi_loss, entropy), g_pi = jax.value_and_grad(actor_loss, has_aux=True)(
-                    actor, qf, alpha, batch[0], k_pi, fn)
-                actor, o_pi = adam_step(actor, g_pi, o_pi, lr)
-                if cfg.ent_auto:
-                    g_al = jax.grad(alpha_loss)(log_alpha, entropy, target_entropy)
-                    log_alpha, o_al = adam_step(log_alpha, g_al, o_al, lr_alpha)
-                return (dict(actor, **qf), target, log_alpha, (o_pi, o_qf, o_al)), (q_loss, pi_loss, alpha)
+                return update_step(state, batch, jax.random.split(k), lr=lr, lr_alpha=lr_alpha, gamma=hp["gamma"], tau=hp["tau"],
+                                   target_entropy=target_entropy, activation=fn, ent_auto=cfg.ent_auto)
 
             (params, target, log_alpha, opts), (q_loss, pi_loss, alpha) = jax.lax.scan(
                 one, (params, target, log_alpha, opts), (data, jax.random.split(k_steps, G)))
@@ -558,7 +588,7 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         def collect(carry, u):
             params, target, log_alpha, opts, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, key = carry
             key, k_roll, k_eps, k_grad = jax.random.split(key, 4)
-            eps_held = jax.random.normal(k_eps, (B, act_dim), f32)  # use_sde: one draw per collect (reset_noise)
+            eps_held = standard_normal(k_eps, (B, act_dim))  # use_sde: one draw per collect (reset_noise)
             (params, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, _), ended = jax.lax.scan(
                 env_step, (params, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, eps_held),
                 (jax.random.split(k_roll, F), u * F + jnp.arange(F)))
