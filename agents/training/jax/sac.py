@@ -90,7 +90,8 @@ from .ppo import _pos_int, _schedule
 
 __all__ = ["SACConfig", "HPARAMS", "RECIPE_KEYS", "sac_config", "make_env", "make_train", "init_params",
            "actor_dist", "tanh_log_prob", "standard_normal", "q_values", "critic_loss", "actor_loss", "alpha_loss", "polyak",
-           "init_opts", "update_step", "ring_init", "ring_write", "sample_indices"]
+           "init_opts", "update_step", "ring_init", "ring_write", "sample_indices", "offpolicy_fields",
+           "offpolicy_train", "SACHooks"]
 
 #: float hyperparameters passed to ``train(key, hparams)``: traced, so ``jax.vmap`` sweeps them
 HPARAMS = ("learning_rate", "tau", "gamma", "ent_coef", "target_entropy", "norm_gamma", "clip_obs", "clip_reward",
@@ -175,36 +176,24 @@ def _ent_coef(value) -> tuple[float, bool]:
     return float(value), False
 
 
-def sac_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, total_timesteps: int | None = None,
-               dtype: str = "float32") -> tuple[SACConfig, dict]:
-    """``(config, hparams)`` of a recipe's hyperparameters (SB3/rl-zoo3 names, defaults SBX's SAC).
-
-    Parameters
-    ----------
-    hyperparams : the recipe's keys (:data:`RECIPE_KEYS`): ``n_envs``, ``buffer_size``, ``learning_starts``,
-        ``batch_size``, ``tau``, ``gamma``, ``train_freq`` (env steps per copy between updates), ``gradient_steps``,
-        ``learning_rate`` (number or ``"lin_<x>"``), ``ent_coef`` (``"auto"``, ``"auto_<x>"`` or a number),
-        ``target_entropy`` (``"auto"``: ``-dim(A)``, or a number), ``use_sde``, ``normalize`` (as
-        :func:`agents.training.jax.ppo.ppo_config`), ``normalize_actions``, ``policy_kwargs`` (``net_arch`` a
-        list shared by actor and critics, ``activation_fn`` ``"relu"``/``"tanh"``), ``env_kwargs``,
-        ``n_timesteps``. A key the trainer does not implement raises ``ValueError`` naming it.
-    env_id : a Gymnasium id of :func:`dobs_envs.jax.registered_envs`.
-    total_timesteps : the budget (default ``n_timesteps``).
-    dtype : the environment's (and the normaliser's) float type; the networks are float32.
-    """
+def offpolicy_fields(hyperparams: dict, recipe_keys: tuple, name: str, *, total_timesteps: int | None,
+                     dtype: str) -> tuple[dict, dict, dict]:
+    """The keys SAC and TD3 share (SB3's ``OffPolicyAlgorithm``, ``VecNormalize``, the policy's MLP): ``(fields,
+    hparams, hp)``, the :class:`SACConfig` fields and float hyperparameters they give, and the recipe as a dict
+    (for the algorithm's own keys). A key outside ``recipe_keys`` is refused naming it and the trainer ``name``."""
     if not isinstance(hyperparams, dict):
         raise TypeError(f"hyperparams must be a dict of recipe keys, got {type(hyperparams).__name__}")
-    unknown = sorted(set(hyperparams) - set(RECIPE_KEYS))
+    unknown = sorted(set(hyperparams) - set(recipe_keys))
     if unknown:
-        raise ValueError(f"hyperparameters {unknown} are not implemented by the JAX SAC trainer; "
-                         f"supported keys: {list(RECIPE_KEYS)}")
+        raise ValueError(f"hyperparameters {unknown} are not implemented by the JAX {name} trainer; "
+                         f"supported keys: {list(recipe_keys)}")
     hp = dict(hyperparams)
     if hp.get("policy", "MlpPolicy") != "MlpPolicy":
         raise ValueError(f"policy must be 'MlpPolicy', got {hp['policy']!r}")
     pk = dict(hp.get("policy_kwargs") or {})
     bad = sorted(set(pk) - set(_POLICY_KWARGS))
     if bad:
-        raise ValueError(f"policy_kwargs {bad} are not implemented by the JAX SAC trainer; supported: "
+        raise ValueError(f"policy_kwargs {bad} are not implemented by the JAX {name} trainer; supported: "
                          f"{list(_POLICY_KWARGS)}")
     net_arch = pk.get("net_arch", [256, 256])
     if not isinstance(net_arch, (list, tuple)) or not net_arch:
@@ -232,10 +221,6 @@ def sac_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
             raise ValueError(f"train_freq must be a positive integer or [n, 'step'] (episodes are not implemented), "
                              f"got {train_freq!r}")
         train_freq = train_freq[0]
-    alpha0, ent_auto = _ent_coef(hp.get("ent_coef", "auto"))
-    target = hp.get("target_entropy", "auto")
-    if target != "auto" and (isinstance(target, bool) or not isinstance(target, (int, float))):
-        raise ValueError(f"target_entropy must be 'auto' or a number, got {target!r}")
     total = _pos_int("total_timesteps", hp.get("n_timesteps", 1_000_000) if total_timesteps is None
                      else total_timesteps)
     learning_starts = hp.get("learning_starts", 100)
@@ -250,22 +235,49 @@ def sac_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
     for k in ("normalized_actions", "dtype"):
         if k in env_kwargs:
             raise ValueError(f"env_kwargs may not set {k!r} (the trainer sets it: normalize_actions / dtype)")
+    fields = dict(total_timesteps=total, n_envs=_pos_int("n_envs", hp.get("n_envs", 1)),
+                  buffer_size=_pos_int("buffer_size", hp.get("buffer_size", 1_000_000)),
+                  learning_starts=int(learning_starts), batch_size=_pos_int("batch_size", hp.get("batch_size", 256)),
+                  train_freq=_pos_int("train_freq", train_freq),
+                  gradient_steps=_pos_int("gradient_steps", hp.get("gradient_steps", 1)), net_arch=net_arch,
+                  activation=activation, lr_linear=lr_linear, norm_obs=bool(norm.get("norm_obs", True)),
+                  norm_reward=bool(norm.get("norm_reward", True)),
+                  normalize_actions=bool(hp.get("normalize_actions", False)), env_kwargs=env_kwargs, dtype=dtype)
+    gamma = float(hp.get("gamma", 0.99))
+    hparams = {"learning_rate": lr, "tau": float(tau), "gamma": gamma, "norm_gamma": float(norm.get("gamma", gamma)),
+               "clip_obs": float(norm.get("clip_obs", 10.0)), "clip_reward": float(norm.get("clip_reward", 10.0)),
+               "norm_epsilon": float(norm.get("epsilon", 1e-8))}
+    return fields, hparams, hp
+
+
+def sac_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, total_timesteps: int | None = None,
+               dtype: str = "float32") -> tuple[SACConfig, dict]:
+    """``(config, hparams)`` of a recipe's hyperparameters (SB3/rl-zoo3 names, defaults SBX's SAC).
+
+    Parameters
+    ----------
+    hyperparams : the recipe's keys (:data:`RECIPE_KEYS`): ``n_envs``, ``buffer_size``, ``learning_starts``,
+        ``batch_size``, ``tau``, ``gamma``, ``train_freq`` (env steps per copy between updates), ``gradient_steps``,
+        ``learning_rate`` (number or ``"lin_<x>"``), ``ent_coef`` (``"auto"``, ``"auto_<x>"`` or a number),
+        ``target_entropy`` (``"auto"``: ``-dim(A)``, or a number), ``use_sde``, ``normalize`` (as
+        :func:`agents.training.jax.ppo.ppo_config`), ``normalize_actions``, ``policy_kwargs`` (``net_arch`` a
+        list shared by actor and critics, ``activation_fn`` ``"relu"``/``"tanh"``), ``env_kwargs``,
+        ``n_timesteps``. A key the trainer does not implement raises ``ValueError`` naming it.
+    env_id : a Gymnasium id of :func:`dobs_envs.jax.registered_envs`.
+    total_timesteps : the budget (default ``n_timesteps``).
+    dtype : the environment's (and the normaliser's) float type; the networks are float32.
+    """
+    fields, hparams, hp = offpolicy_fields(hyperparams, RECIPE_KEYS, "SAC", total_timesteps=total_timesteps,
+                                           dtype=dtype)
+    alpha0, ent_auto = _ent_coef(hp.get("ent_coef", "auto"))
+    target = hp.get("target_entropy", "auto")
+    if target != "auto" and (isinstance(target, bool) or not isinstance(target, (int, float))):
+        raise ValueError(f"target_entropy must be 'auto' or a number, got {target!r}")
     use_sde = hp.get("use_sde", False)
     if not isinstance(use_sde, bool):
         raise ValueError(f"use_sde must be true or false, got {use_sde!r}")
-    cfg = SACConfig(env_id=env_id, total_timesteps=total, n_envs=_pos_int("n_envs", hp.get("n_envs", 1)),
-                    buffer_size=_pos_int("buffer_size", hp.get("buffer_size", 1_000_000)),
-                    learning_starts=int(learning_starts), batch_size=_pos_int("batch_size", hp.get("batch_size", 256)),
-                    train_freq=_pos_int("train_freq", train_freq),
-                    gradient_steps=_pos_int("gradient_steps", hp.get("gradient_steps", 1)), net_arch=net_arch,
-                    activation=activation, lr_linear=lr_linear, ent_auto=ent_auto, use_sde=use_sde,
-                    norm_obs=bool(norm.get("norm_obs", True)), norm_reward=bool(norm.get("norm_reward", True)),
-                    normalize_actions=bool(hp.get("normalize_actions", False)), env_kwargs=env_kwargs, dtype=dtype)
-    gamma = float(hp.get("gamma", 0.99))
-    hparams = {"learning_rate": lr, "tau": float(tau), "gamma": gamma, "ent_coef": alpha0,
-               "target_entropy": math.nan if target == "auto" else float(target),
-               "norm_gamma": float(norm.get("gamma", gamma)), "clip_obs": float(norm.get("clip_obs", 10.0)),
-               "clip_reward": float(norm.get("clip_reward", 10.0)), "norm_epsilon": float(norm.get("epsilon", 1e-8))}
+    cfg = SACConfig(env_id=env_id, ent_auto=ent_auto, use_sde=use_sde, **fields)
+    hparams.update(ent_coef=alpha0, target_entropy=math.nan if target == "auto" else float(target))
     return cfg, hparams
 
 
@@ -464,6 +476,39 @@ def sample_indices(key, n: int, pos, full, rows: int, n_envs: int):
 
 # ---- the run ---------------------------------------------------------------------------------------------------
 
+class SACHooks:
+    """What :func:`offpolicy_train` asks of SAC: the learner's state ``(params, target critics, log alpha, Adam
+    states)``, the exploring action, one gradient step, the run's outputs."""
+    HPARAMS = HPARAMS
+    LOSSES = ("critic_loss", "actor_loss", "ent_coef")
+
+    def __init__(self, cfg: SACConfig, obs_dim: int, act_dim: int):
+        self.cfg, self.obs_dim, self.act_dim = cfg, obs_dim, act_dim
+
+    def init(self, key, hp):
+        params = init_params(key, self.obs_dim, self.act_dim, self.cfg.net_arch)
+        log_alpha = jnp.log(hp["ent_coef"]).astype(jnp.float32)
+        return params, _critic_params(params), log_alpha, init_opts(params, log_alpha)
+
+    def act(self, learner, obs_n, key, eps_held, hp):
+        """``tanh(mu + sigma eps)`` clipped to ``[-1, 1]``; ``eps`` held over the collect with ``use_sde``."""
+        mu, log_std = actor_dist(learner[0], obs_n, self.cfg.activation)
+        eps = eps_held if self.cfg.use_sde else standard_normal(key, mu.shape)
+        return jnp.clip(jnp.tanh(mu + jnp.exp(log_std) * eps), -1.0, 1.0)
+
+    def noise(self, a, key, hp):
+        return a
+
+    def update(self, learner, batch, key, lr, hp):
+        target_entropy = jnp.where(jnp.isnan(hp["target_entropy"]), -float(self.act_dim), hp["target_entropy"])
+        return update_step(learner, batch, jax.random.split(key), lr=lr, lr_alpha=hp["learning_rate"],
+                           gamma=hp["gamma"], tau=hp["tau"], target_entropy=target_entropy,
+                           activation=self.cfg.activation, ent_auto=self.cfg.ent_auto)
+
+    def outputs(self, learner) -> dict:
+        return {"params": learner[0], "target": learner[1], "log_alpha": learner[2]}
+
+
 def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return_buffer: bool = False):
     """``train(key, hparams) -> dict``: one SAC run as a pure function (``jax.jit`` / ``jax.vmap`` it).
 
@@ -489,6 +534,13 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         - ``buffer_pos``, ``buffer_full``: the ring buffer's write position and whether it wrapped;
         - ``snapshots`` (with ``snapshots``): ``pi_*`` ``(K, ...)``, ``obs_mean (K, D)``, ``obs_var (K, D)``.
     """
+    return offpolicy_train(cfg, SACHooks, env, env_params, snapshots, return_buffer)
+
+
+def offpolicy_train(cfg: SACConfig, hooks, env=None, env_params=None, snapshots=None, return_buffer: bool = False):
+    """The run of :func:`make_train` for an off-policy algorithm given by ``hooks`` (a class like
+    :class:`SACHooks`, built with ``(cfg, obs_dim, act_dim)``): SB3's collect / train loop, the ring buffer,
+    ``VecNormalize``, the learning-curve snapshots of ``learner[0]``'s ``pi_*`` arrays."""
     if env is None:
         env, env_params = make_env(cfg)
     elif env_params is None:
@@ -496,6 +548,7 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
     B, F, G, R = cfg.n_envs, cfg.train_freq, cfg.gradient_steps, cfg.buffer_rows
     obs_dim = int(np.prod(env.observation_space(env_params).shape))
     act_dim = int(env.num_actions)
+    algo = hooks(cfg, obs_dim, act_dim)
     space = env.action_space(env_params)
     a_low = jnp.asarray(np.broadcast_to(np.asarray(space.low, np.float32), (act_dim,)))
     a_high = jnp.asarray(np.broadcast_to(np.asarray(space.high, np.float32), (act_dim,)))
@@ -503,7 +556,6 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
     total = float(cfg.total_timesteps)
     v_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
     v_reset = jax.vmap(env.reset, in_axes=(0, None))
-    fn = cfg.activation
     snap_at = None
     if snapshots is not None:
         snap_at = np.unique(np.asarray([int(u) for u in snapshots], dtype=np.int64))
@@ -520,13 +572,9 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         return jax.tree.map(lambda b, x: b.at[slot].set(jnp.where(hit, x.astype(b.dtype), b[slot])), buf, snap)
 
     def train(key, hparams: dict):
-        hp = {k: jnp.asarray(hparams[k]) for k in HPARAMS}
-        target_entropy = jnp.where(jnp.isnan(hp["target_entropy"]), -float(act_dim), hp["target_entropy"])
+        hp = {k: jnp.asarray(hparams[k]) for k in algo.HPARAMS}
         k_init, k_reset, key = jax.random.split(key, 3)
-        params = init_params(k_init, obs_dim, act_dim, cfg.net_arch)
-        target = _critic_params(params)
-        log_alpha = jnp.log(hp["ent_coef"]).astype(jnp.float32)
-        opts = init_opts(params, log_alpha)
+        learner = algo.init(k_init, hp)
         obs, env_state = v_reset(jax.random.split(k_reset, B), env_params)
         norm = nz.norm_init((obs_dim,), B, stat_dtype)
         if cfg.norm_obs:  # VecNormalize.reset updates the statistics with the first observations
@@ -538,14 +586,13 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
         ring = ring_init(R, B, obs_dim, act_dim)
 
         def env_step(carry, x):
-            params, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, eps_held = carry
+            learner, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, eps_held = carry
             k, t = x
-            k_act, k_rand, k_env = jax.random.split(k, 3)
-            mu, log_std = actor_dist(params, obs_n, fn)
-            eps = eps_held if cfg.use_sde else standard_normal(k_act, mu.shape)
-            a = jnp.clip(jnp.tanh(mu + jnp.exp(log_std) * eps), -1.0, 1.0)
-            random = jax.random.uniform(k_rand, mu.shape, f32, -1.0, 1.0)
+            k_act, k_rand, k_noise, k_env = jax.random.split(k, 4)
+            a = algo.act(learner, obs_n, k_act, eps_held, hp)
+            random = jax.random.uniform(k_rand, a.shape, f32, -1.0, 1.0)
             a = jnp.where(t * B < cfg.learning_starts, random, a)  # t: vector steps taken before this one
+            a = algo.noise(a, k_noise, hp)  # SB3's action noise (TD3), on random actions too
             u = a_low + 0.5 * (a + 1.0) * (a_high - a_low)
             obs, env_state, reward, term, trunc, info = v_step(jax.random.split(k_env, B), env_state, u, env_params)
             done = term | trunc
@@ -560,11 +607,11 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
             ep_ret = ep_ret + reward.astype(stat_dtype)
             ep_len = ep_len + 1
             ended = (jnp.sum(done), jnp.sum(jnp.where(done, ep_ret, 0.0)), jnp.sum(jnp.where(done, ep_len, 0)))
-            carry = (params, norm, env_state, obs, next_obs_n, jnp.where(done, 0.0, ep_ret),
+            carry = (learner, norm, env_state, obs, next_obs_n, jnp.where(done, 0.0, ep_ret),
                      jnp.where(done, 0, ep_len), ring, eps_held)
             return carry, ended
 
-        def gradient_steps(params, target, log_alpha, opts, norm, ring, key, lr, lr_alpha):
+        def gradient_steps(learner, norm, ring, key, lr):
             buf, pos, full = ring
             k_idx, k_steps = jax.random.split(key)
             rows, envs = sample_indices(k_idx, cfg.batch_size * G, pos, full, R, B)
@@ -581,59 +628,50 @@ def make_train(cfg: SACConfig, env=None, env_params=None, snapshots=None, return
                 rew_b = nz.normalize_reward(norm.ret_rms, rew_b, hp["clip_reward"], hp["norm_epsilon"]).astype(f32)
             data = (obs_b, take("action"), next_b, rew_b, take("done"))
 
-            def one(state, x):
+            def one(learner, x):
                 batch, k = x
-                return update_step(state, batch, jax.random.split(k), lr=lr, lr_alpha=lr_alpha, gamma=hp["gamma"], tau=hp["tau"],
-                                   target_entropy=target_entropy, activation=fn, ent_auto=cfg.ent_auto)
+                return algo.update(learner, batch, k, lr, hp)
 
-            (params, target, log_alpha, opts), (q_loss, pi_loss, alpha) = jax.lax.scan(
-                one, (params, target, log_alpha, opts), (data, jax.random.split(k_steps, G)))
-            return params, target, log_alpha, opts, (q_loss[-1], pi_loss[-1], alpha[-1])
+            learner, losses = jax.lax.scan(one, learner, (data, jax.random.split(k_steps, G)))
+            return learner, tuple(x[-1] for x in losses)
 
         def collect(carry, u):
-            params, target, log_alpha, opts, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, key = carry
+            learner, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, key = carry
             key, k_roll, k_eps, k_grad = jax.random.split(key, 4)
             eps_held = standard_normal(k_eps, (B, act_dim))  # use_sde: one draw per collect (reset_noise)
-            (params, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, _), ended = jax.lax.scan(
-                env_step, (params, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, eps_held),
+            (learner, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, _), ended = jax.lax.scan(
+                env_step, (learner, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, eps_held),
                 (jax.random.split(k_roll, F), u * F + jnp.arange(F)))
             steps = (u + 1) * cfg.rollout
             lr = hp["learning_rate"] * ((1.0 - steps / total) if cfg.lr_linear else 1.0)
             nan = jnp.full((), jnp.nan, f32)
-
-            def learn(args):
-                return gradient_steps(*args, norm, ring, k_grad, lr, hp["learning_rate"])
-
-            def wait(args):
-                return (*args, (nan, nan, nan))
-
-            params, target, log_alpha, opts, losses = jax.lax.cond(
-                steps > cfg.learning_starts, learn, wait, (params, target, log_alpha, opts))
+            learner, losses = jax.lax.cond(steps > cfg.learning_starts,
+                                           lambda lrn: gradient_steps(lrn, norm, ring, k_grad, lr),
+                                           lambda lrn: (lrn, (nan,) * len(algo.LOSSES)), learner)
             n_ep, ret_sum, len_sum = (jnp.sum(x) for x in ended)
             has = n_ep > 0
             curve = {"steps": steps,
                      "episode_return": jnp.where(has, ret_sum / jnp.maximum(n_ep, 1), jnp.nan),
                      "episode_length": jnp.where(has, len_sum / jnp.maximum(n_ep, 1), jnp.nan),
-                     "episodes": n_ep, "critic_loss": losses[0], "actor_loss": losses[1], "ent_coef": losses[2]}
-            return (params, target, log_alpha, opts, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring,
-                    key), curve
+                     "episodes": n_ep, **dict(zip(algo.LOSSES, (x.astype(f32) for x in losses)))}
+            return (learner, norm, env_state, obs_raw, obs_n, ep_ret, ep_len, ring, key), curve
 
-        carry = (params, target, log_alpha, opts, norm, env_state, obs, obs_n.astype(f32),
-                 jnp.zeros((B,), stat_dtype), jnp.zeros((B,), jnp.int32), ring, key)
+        carry = (learner, norm, env_state, obs, obs_n.astype(f32), jnp.zeros((B,), stat_dtype),
+                 jnp.zeros((B,), jnp.int32), ring, key)
         if snap_at is None:
             carry, curve = jax.lax.scan(collect, carry, jnp.arange(cfg.n_updates))
         else:
-            first = snapshot(params, norm)
+            first = snapshot(learner[0], norm)
             buf = keep(jax.tree.map(lambda x: jnp.zeros((snap_at.size,) + x.shape, x.dtype), first), first, 0)
 
             def collect_and_keep(c, u):
                 c, buf = c
                 c, curve = collect(c, u)
-                return (c, keep(buf, snapshot(c[0], c[4]), u + 1)), curve
+                return (c, keep(buf, snapshot(c[0][0], c[1]), u + 1)), curve
 
             (carry, buf), curve = jax.lax.scan(collect_and_keep, (carry, buf), jnp.arange(cfg.n_updates))
-        params, target, log_alpha, norm, ring = carry[0], carry[1], carry[2], carry[4], carry[10]
-        out = {"params": params, "target": target, "log_alpha": log_alpha, "obs_mean": norm.obs_rms.mean,
+        learner, norm, ring = carry[0], carry[1], carry[7]
+        out = {**algo.outputs(learner), "obs_mean": norm.obs_rms.mean,
                "obs_var": norm.obs_rms.var, "obs_count": norm.obs_rms.count, "ret_var": norm.ret_rms.var,
                "ret_count": norm.ret_rms.count, "curve": curve, "buffer_pos": ring[1], "buffer_full": ring[2]}
         if snap_at is not None:
