@@ -1,5 +1,5 @@
 """Issue 40's first target: a 600k-step jitted PPO run on tracking beside SB3 PPO's, one core each
-(``--algo sac``: the jitted SAC beside SBX SAC, the project's SAC rows).
+(``--algo sac`` / ``td3``: the jitted SAC / TD3 beside SBX's, the project's off-policy rows).
 
 Both train PPO with the shipped tracking recipe (``agents/hyperparams/ppo.yaml``, read through
 ``agents.training.recipes.resolve_recipe``): the jitted trainer (``agents.training.jax``, one compiled function
@@ -17,11 +17,11 @@ Learning curves at equal steps: both record the raw (un-normalised) return of ev
 (SB3: its ``Monitor`` infos; JAX: the trainer's curve), binned by rollout (``n_envs n_steps`` steps; SAC: a
 collect of ``n_envs train_freq`` steps).
 
-    PYTHONPATH=. python benchmarks/bench_jax_train.py [--algo ppo|sac] [--steps 600000] [--seed 0] [--out results/x.json]
+    PYTHONPATH=. python benchmarks/bench_jax_train.py [--algo ppo|sac|td3] [--steps 600000] [--seed 0] [--out x.json]
 
-``--algo sac`` trains the shipped SAC recipe (``agents/config/hyperparams/sac.yaml``) with the jitted SAC
-(``agents.training.jax.sac``) and, in the child, through the same SB3 entry, which trains SAC with SBX when the
-``jax`` extra is installed (``agents.training.algos``; the record's ``sb3.library``); SBX's XLA runs on one
+``--algo sac`` (``td3``) trains the shipped recipe (``agents/config/hyperparams/sac.yaml``, ``td3.yaml``) with
+the jitted trainer (``agents.training.jax.sac``, ``.td3``) and, in the child, through the same SB3 entry, which
+uses SBX when the ``jax`` extra is installed (``agents.training.algos``; the record's ``sb3.library``); SBX's XLA runs on one
 thread too (the child inherits ``PJRT_NPROC`` / ``XLA_FLAGS``; ``train(threads=1)``).
 
 ``--steps 16384`` is a smoke test (a few minutes with compilation). The JSON record is written only with
@@ -92,6 +92,8 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1, algo: str 
     from agents.training.jax.export import save_policy
     if algo == "sac":
         from agents.training.jax.sac import make_env, make_train, sac_config as read_config
+    elif algo == "td3":
+        from agents.training.jax.td3 import make_env, make_train, td3_config as read_config
     else:
         from agents.training.jax.ppo import make_env, make_train, ppo_config as read_config
 
@@ -116,7 +118,7 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1, algo: str 
     save_policy(policy_dir, out, cfg, hp, env, env_params, extra={"seed": seed, "steps": steps, "n_seeds": n_seeds})
     return {"setup_cpu": setup[0], "setup_wall": setup[1], "compile_cpu": comp[0], "compile_wall": comp[1],
             "run_cpu": run[0], "run_wall": run[1], "n_seeds": n_seeds, "run_cpu_per_run": run[0] / n_seeds, "steps_done": cfg.steps_done,
-            "rollout": cfg.rollout if algo == "sac" else cfg.n_envs * cfg.n_steps,
+            "rollout": cfg.n_envs * cfg.n_steps if algo == "ppo" else cfg.rollout,
             "curve": {"steps": c["steps"].tolist(), "episodes": c["episodes"].tolist(),
                       "return_sum": np.nan_to_num(c["episode_return"] * c["episodes"]).tolist()},
             "jax_version": jax.__version__, "dtype": cfg.dtype}
@@ -182,8 +184,8 @@ def binned(episodes: list, rollout: int, n_bins: int) -> tuple[np.ndarray, np.nd
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--algo", choices=("ppo", "sac"), default="ppo",
-                    help="ppo (default): jitted PPO vs SB3 PPO; sac: jitted SAC vs SBX SAC (shipped recipes)")
+    ap.add_argument("--algo", choices=("ppo", "sac", "td3"), default="ppo",
+                    help="ppo (default): jitted PPO vs SB3 PPO; sac, td3: jitted vs SBX (shipped recipes)")
     ap.add_argument("--steps", type=int, default=600_000, help="env steps of each run (default 600000)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="write the JSON record here (e.g. results/bench_jax_train.json)")

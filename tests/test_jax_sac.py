@@ -1,6 +1,6 @@
-"""The jitted SAC trainer (agents/training/jax/sac.py): gradient steps against SBX's own SAC update and an
-independent float64 numpy computation, the replay ring buffer, truncation handling, vmap over seeds, the
-numpy export and the CLI (``train --trainer jax --algo sac``, ``evaluate --model``)."""
+"""The jitted SAC and TD3 trainers (agents/training/jax/sac.py, td3.py): gradient steps against SBX's own SAC and
+TD3 updates and an independent float64 numpy computation, the replay ring buffer, truncation handling, vmap over
+seeds, the numpy export and the CLI (``train --trainer jax --algo sac|td3``, ``evaluate --model``)."""
 from __future__ import annotations
 
 import json
@@ -281,12 +281,16 @@ def test_unimplemented_or_bad_recipe_keys_are_refused_by_name(bad, name):
 
 # ---- the CLI ------------------------------------------------------------------------------------------------------
 
-#: the tracking recipe with tiny networks and 4 collects of 8 x 32 steps (a curve of 5 points)
+#: the tracking recipe (SAC's or TD3's) with tiny networks and 4 collects of 8 x 32 steps (a curve of 5 points)
 CLI_HP = {"policy_kwargs": {"net_arch": [16, 16], "activation_fn": "relu"}, "learning_starts": 256, "batch_size": 64,
           "buffer_size": 2048, "train_freq": 32, "gradient_steps": 4}
 
 
-def test_cli_sac_run_directory_and_evaluate(tmp_path, capsys):
+@pytest.mark.parametrize("algo, refused", [("sac", "policy_delay"), ("td3", "use_sde")])
+def test_cli_run_directory_and_evaluate(algo, refused, tmp_path, capsys):
+    """``train --trainer jax --algo sac|td3``: the run directory (the records, the exported tanh policy, the curve
+    in the benchmark's format), ``evaluate --model`` scoring it as the "SAC (JAX)" / "TD3 (JAX)" row with the
+    harness's figures, and a recipe key the trainer lacks refused in one line."""
     from importlib import metadata
 
     from agents.config.envs import gym_factory
@@ -295,28 +299,29 @@ def test_cli_sac_run_directory_and_evaluate(tmp_path, capsys):
     from dobs_envs.cli import main
 
     out = str(tmp_path / "run")
-    assert main(["train", "--trainer", "jax", "--algo", "sac", "--env", "tracking", "--timesteps", "1024", "--seed",
+    assert main(["train", "--trainer", "jax", "--algo", algo, "--env", "tracking", "--timesteps", "1024", "--seed",
                  "2", "--out", out, "--no-progress", "--hyperparams", json.dumps(CLI_HP)]) == 0
-    assert "trained sac (jax) on tracking: 1024 env steps" in capsys.readouterr().out
+    assert f"trained {algo} (jax) on tracking: 1024 env steps" in capsys.readouterr().out
     assert sorted(os.listdir(out)) == ["config.json", "curve.json", "policy.json", "policy.npz", "train_curve.json"]
     cfg = json.load(open(os.path.join(out, "config.json")))
-    assert cfg["trainer"] == "jax" and cfg["library"] == "agents.training.jax" and cfg["algo"] == "sac"
+    assert cfg["trainer"] == "jax" and cfg["library"] == "agents.training.jax" and cfg["algo"] == algo
     assert cfg["jax_version"] == jax.__version__ and cfg["optax_version"] == metadata.version("optax")
     assert cfg["status"] == "complete" and cfg["seed"] == 2 and cfg["timesteps_done"] == 1024
     assert cfg["n_updates"] == 4 and cfg["rollout"] == 256
-    assert cfg["hyperparams"] == json.loads(json.dumps(resolve_recipe("sac", "tracking", overrides=CLI_HP).hyperparams))
+    assert cfg["hyperparams"] == json.loads(json.dumps(resolve_recipe(algo, "tracking", overrides=CLI_HP).hyperparams))
     for k in ("compile_seconds", "train_seconds", "train_cpu_seconds", "curve_seconds"):
         assert math.isfinite(cfg[k]) and cfg[k] > 0, k
-    assert json.load(open(os.path.join(out, "policy.json")))["kind"] == "tanh"
+    meta = json.load(open(os.path.join(out, "policy.json")))
+    assert meta["kind"] == "tanh" and meta["trainer"] == f"agents.training.jax.{algo}"
     curve = json.load(open(os.path.join(out, "curve.json")))
     assert [p["env_steps"] for p in curve["points"]] == [0, 256, 512, 768, 1024]
     tc = json.load(open(os.path.join(out, "train_curve.json")))
     assert tc["steps"] == [256, 512, 768, 1024] and tc["critic_loss"][0] is None and tc["critic_loss"][1] is not None
-    # evaluate --model: the "SAC (JAX)" row, the harness's figures on the compiled env
+    # evaluate --model: the "SAC (JAX)" / "TD3 (JAX)" row, the harness's figures on the compiled env
     js = str(tmp_path / "eval.json")
     assert main(["evaluate", "--model", out, "--episodes", "2", "--seed", "10000", "--json", js]) == 0
     summ = json.load(open(js))
-    assert summ["policy"] == "SAC (JAX)" and summ["seeds"] == [10000, 10001]
+    assert summ["policy"] == f"{algo.upper()} (JAX)" and summ["seeds"] == [10000, 10001]
     env = gym_factory("tracking", {})()
     ref = summarise(evaluate_policy(env, NumpyPolicy(out), 2, 10000, parallel=False))
     env.close()
@@ -324,8 +329,68 @@ def test_cli_sac_run_directory_and_evaluate(tmp_path, capsys):
     # a recipe key the trainer lacks: one usage line naming it, the run directory untouched
     before = {f: open(os.path.join(out, f), "rb").read() for f in os.listdir(out)}
     with pytest.raises(SystemExit) as exc:
-        main(["train", "--trainer", "jax", "--algo", "sac", "--timesteps", "64", "--no-progress", "--out", out,
-              "--overwrite", "--hyperparams", '{"policy_delay": 2}'])
+        main(["train", "--trainer", "jax", "--algo", algo, "--timesteps", "64", "--no-progress", "--out", out,
+              "--overwrite", "--hyperparams", json.dumps({refused: 2})])
     err = capsys.readouterr().err.strip()
-    assert exc.value.code == 2 and "policy_delay" in err and err.count("\n") == 0
+    assert exc.value.code == 2 and refused in err and err.count("\n") == 0
     assert {f: open(os.path.join(out, f), "rb").read() for f in os.listdir(out)} == before
+
+
+# ---- TD3 (the same loop, SBX's TD3 learner) --------------------------------------------------------------------------
+
+def test_td3_gradient_steps_equal_sbx_td3():
+    """Four gradient steps (policy_delay 2: two actor steps) from the same networks, batches and keys: SBX's
+    TD3._train (update_critic with target policy smoothing, soft_update of both targets, delayed update_actor)
+    against td3.update_step; tolerances as for SAC."""
+    import flax.linen as nn
+    import optax
+    from sbx.common.policies import VectorCritic
+    from sbx.common.type_aliases import ReplayBufferSamplesNp, RLTrainState
+    from sbx.td3.policies import Actor
+    from sbx.td3.td3 import TD3
+
+    from agents.training.jax import td3
+
+    D, m, n, G, lr, tau, gamma, sigma, clip = 4, 2, 16, 4, 3e-3, 0.05, 0.97, 0.2, 0.3
+    params = td3.init_td3(jax.random.PRNGKey(0), D, m, (8, 8))
+    target = td3.init_td3(jax.random.PRNGKey(1), D, m, (8, 8))
+    rng = np.random.default_rng(2)
+    obs, act, nxt, rew, done = (jnp.asarray(np.concatenate(x)) for x in zip(*[_batch(rng, n, D, m)
+                                                                              for _ in range(G)]))
+    a_tree, q_tree, qt_tree = _sbx_trees(dict(params, ls_w=None, ls_b=None), target)
+    del a_tree["params"]["Dense_3"]  # the SAC helper's log-sigma head
+    at_tree = {"params": {f"Dense_{i}": {"kernel": target[f"pi_w{i}"], "bias": target[f"pi_b{i}"]} for i in range(3)}}
+    actor = Actor(net_arch=[8, 8], action_dim=m, activation_fn=nn.relu)
+    qf = VectorCritic(net_arch=[8, 8], n_critics=2, activation_fn=nn.relu)
+    adam = optax.inject_hyperparams(optax.adam)(learning_rate=lr)
+    actor_state = RLTrainState.create(apply_fn=actor.apply, params=a_tree, target_params=at_tree, tx=adam)
+    qf_state = RLTrainState.create(apply_fn=qf.apply, params=q_tree, target_params=qt_tree, tx=adam)
+    key = jax.random.PRNGKey(7)
+    samples = ReplayBufferSamplesNp(obs, act, nxt, done, rew, jnp.full((G * n,), gamma, jnp.float32))
+    qf_state, actor_state, _, (pi_loss, q_loss) = TD3._train(tau, G, samples, 2, 1, sigma, clip, qf_state, actor_state,
+                                                             key)
+
+    state = (params, target, td3.init_opts(params), jnp.asarray(0, jnp.int32))
+    step = jax.jit(lambda s, b, k: td3.update_step(s, b, k, lr=lr, gamma=gamma, tau=tau, noise_std=sigma,
+                                                   noise_clip=clip, activation="relu", policy_delay=2))
+    k = key
+    for g in range(G):  # SBX's key chain: update_critic splits 4 (noise: [1]); update_actor splits 2
+        ks = jax.random.split(k, 4)
+        sl = slice(g * n, (g + 1) * n)
+        state, (q_mine, pi_mine) = step(state, tuple(x[sl] for x in (obs, act, nxt, rew, done)), ks[1])
+        k = jax.random.split(ks[0], 2)[0] if g % 2 == 1 else ks[0]
+        assert np.isnan(float(pi_mine)) == (g % 2 == 0)  # the actor moves on every second step
+    p, t, _, count = state
+    assert int(count) == G
+    pairs = [(p[f"pi_{w}{i}"], actor_state.params["params"][f"Dense_{i}"][name])
+             for i in range(3) for w, name in (("w", "kernel"), ("b", "bias"))]
+    pairs += [(t[f"pi_{w}{i}"], actor_state.target_params["params"][f"Dense_{i}"][name])
+              for i in range(3) for w, name in (("w", "kernel"), ("b", "bias"))]
+    crit = qf_state.params["params"]["VmapContinuousCritic_0"]
+    crit_t = qf_state.target_params["params"]["VmapContinuousCritic_0"]
+    pairs += [(src[f"qf_{w}{i}"], tree[f"Dense_{i}"][name]) for src, tree in ((p, crit), (t, crit_t))
+              for i in range(3) for w, name in (("w", "kernel"), ("b", "bias"))]
+    for a, b in pairs:
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=2e-6)
+    assert float(np.max(np.abs(np.asarray(p["pi_w2"]) - np.asarray(params["pi_w2"])))) > 5e-3  # the actor moved
+    np.testing.assert_allclose([float(q_mine), float(pi_mine)], [float(q_loss), float(pi_loss)], rtol=1e-5)

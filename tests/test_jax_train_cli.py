@@ -106,7 +106,7 @@ def test_evaluate_scores_the_jitted_run_with_the_harness(jax_run, tmp_path, caps
 
 
 @pytest.mark.parametrize("extra, names", [
-    (["--algo", "td3"], ["--algo", "ppo | sac", "td3"]),
+    (["--algo", "crossq"], ["--algo", "ppo | sac | td3", "crossq"]),
     (["--multi-agent"], ["--multi-agent"]),
     (["--hybrid", "residual"], ["--hybrid"]),
     (["--resume", "runs/x"], ["--resume"]),

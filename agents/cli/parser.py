@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
     p.add_argument("--trainer", choices=TRAINERS, default="sb3",
                    help="sb3 (default): Stable-Baselines3 / SBX on the compiled envs; jax: the jitted trainer "
                         "(agents.training.jax: the whole run one compiled function on dobs_envs.jax; "
-                        "--algo ppo | sac; exports policy.npz + policy.json)")
+                        "--algo ppo | sac | td3; exports policy.npz + policy.json)")
     p.add_argument("--multi-agent", action="store_true", default=None,
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac)")
     p.add_argument("--timesteps", type=_positive_int, default=None,

@@ -1,6 +1,6 @@
-"""``dobs-envs train --trainer jax``: one jitted PPO (:mod:`.ppo`) or SAC (:mod:`.sac`) run as a run directory.
+"""``dobs-envs train --trainer jax``: one jitted PPO (:mod:`.ppo`), SAC (:mod:`.sac`) or TD3 (:mod:`.td3`) run.
 
-:func:`train_jax` resolves the same recipe as SB3 PPO / SBX SAC (:func:`agents.training.recipes.resolve_recipe`,
+:func:`train_jax` resolves the same recipe as SB3 PPO / SBX SAC / SBX TD3 (:func:`agents.training.recipes.resolve_recipe`,
 overrides merged), compiles the whole run as one function (the algorithm's ``make_train``,
 ``jax.random.PRNGKey(seed)``), runs it and writes into ``out`` (nothing pickled):
 
@@ -11,10 +11,10 @@ overrides merged), compiles the whole run as one function (the algorithm's ``mak
   ``J_policy / J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the
   task's own compiled environment, of the policy kept after evenly spaced updates (the run's snapshots,
   ``make_train``'s ``snapshots``; the first point is the initial policy), evaluated after the run; an update is
-  PPO's rollout of ``n_envs n_steps`` steps, SAC's collect of ``n_envs train_freq`` steps and its gradient steps;
+  PPO's rollout of ``n_envs n_steps`` steps, SAC's (TD3's) collect of ``n_envs train_freq`` steps and its gradient steps;
 - ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the
   training episodes that ended in the rollout, their count; PPO: approximate KL, value loss; SAC: critic and
-  actor losses, entropy coefficient; ``null`` where no episode ended or nothing was learnt yet);
+  actor losses, entropy coefficient; TD3: critic and actor losses; ``null`` where no episode ended or nothing was learnt yet);
 - ``config.json``: ``trainer: "jax"``, ``library`` (:data:`agents.training.jax.LIBRARY`) and ``library_version``
   (dobs-envs'), ``jax_version``, ``jaxlib_version``, ``optax_version``, the env and its JAX id, the recipe
   (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the
@@ -88,7 +88,7 @@ def _plain(x):
 
 
 #: per algorithm: (module, its recipe reader)
-_ALGO_MODULES = {"ppo": ("ppo", "ppo_config"), "sac": ("sac", "sac_config")}
+_ALGO_MODULES = {"ppo": ("ppo", "ppo_config"), "sac": ("sac", "sac_config"), "td3": ("td3", "td3_config")}
 
 
 def _rollout(cfg) -> int:
@@ -131,8 +131,8 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     ----------
     env : a name of the JAX environments or its Gymnasium id (:func:`jax_env`; the run records the name).
     timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole updates (PPO: rollouts of
-        ``n_envs * n_steps`` steps; SAC: collects of ``n_envs * train_freq``; ``timesteps_done >= timesteps``, as SB3).
-    algo : ``"ppo"`` or ``"sac"`` (:data:`agents.training.jax.ALGOS`).
+        ``n_envs * n_steps`` steps; SAC, TD3: collects of ``n_envs * train_freq``; ``timesteps_done >= timesteps``, as SB3).
+    algo : ``"ppo"``, ``"sac"`` or ``"td3"`` (:data:`agents.training.jax.ALGOS`).
     hyperparams : overrides merged over the recipe (``agents/config/hyperparams/<algo>.yaml``).
     threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
     progress : one line on stderr per phase (compile, run, curve).
@@ -140,7 +140,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).
 
     Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
-    trainer does not implement (:func:`.ppo.ppo_config` / :func:`.sac.sac_config` name the key);
+    trainer does not implement (:func:`.ppo.ppo_config`, :func:`.sac.sac_config`, :func:`.td3.td3_config` name the key);
     :class:`agents.config.hyperparam_files.HyperparamsError` from the recipe files.
 
     An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
