@@ -47,7 +47,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 ENV, ENV_ID = "tracking", "dobs_envs/Tracking-v0"
-TAIL_ROLLOUTS = 10  # "final" return: the mean over the episodes that ended in the last 10 rollouts
+TAIL_ROLLOUTS = 10  # "final" return: the mean over the episodes that ended in the last 10 rollouts (PPO) or in
+#                     the last tenth of the collects (SAC, TD3: collects of 32 or 8 steps hold few episode ends)
 
 
 def _load() -> list:
@@ -223,8 +224,14 @@ def main(argv=None) -> int:
           f"{jx['run_cpu_per_run']:.1f} s CPU per run)")
     n_bins, rollout = len(jx["curve"]["steps"]), jx["rollout"]
     j_count, j_sum = np.asarray(jx["curve"]["episodes"]), np.asarray(jx["curve"]["return_sum"])
-    tail = slice(max(0, n_bins - TAIL_ROLLOUTS), n_bins)
-    record["jax_final_return"] = float(j_sum[tail].sum() / max(j_count[tail].sum(), 1))
+    n_tail = TAIL_ROLLOUTS if args.algo == "ppo" else max(1, n_bins // 10)
+    tail = slice(max(0, n_bins - n_tail), n_bins)
+    record["tail_bins"] = n_tail
+
+    def mean_return(count, total):  # NaN when no episode ended there
+        return float(total.sum() / count.sum()) if count.sum() else float("nan")
+
+    record["jax_final_return"] = mean_return(j_count[tail], j_sum[tail])
     if not args.skip_sb3:
         record["load_before_sb3"] = _load()
         sb = run_sb3(args.steps, args.seed, run_dir, args.algo)
@@ -232,7 +239,7 @@ def main(argv=None) -> int:
         s_count, s_sum = binned(sb.pop("episodes"), rollout, n_bins)
         record["sb3"] = sb
         record["sb3_curve"] = {"episodes": s_count.tolist(), "return_sum": s_sum.tolist()}
-        record["sb3_final_return"] = float(s_sum[tail].sum() / max(s_count[tail].sum(), 1))
+        record["sb3_final_return"] = mean_return(s_count[tail], s_sum[tail])
         record["ratio_run_cpu"] = jx["run_cpu"] / sb["cpu"]
         record["ratio_run_cpu_per_run"] = jx["run_cpu_per_run"] / sb["cpu"]
         record["ratio_compile_and_run_cpu"] = (jx["compile_cpu"] + jx["run_cpu"]) / sb["cpu"]
@@ -247,7 +254,7 @@ def main(argv=None) -> int:
             jr = j_sum[part].sum() / max(j_count[part].sum(), 1)
             sr = s_sum[part].sum() / max(s_count[part].sum(), 1)
             print(f"  up to {int(jx['curve']['steps'][part[-1]]):>7d} steps: {jr:12.1f} | {sr:12.1f}")
-        print(f"final (last {TAIL_ROLLOUTS} rollouts): JAX {record['jax_final_return']:.1f}, "
+        print(f"final (last {n_tail} rollouts / collects): JAX {record['jax_final_return']:.1f}, "
               f"SB3 {record['sb3_final_return']:.1f}")
     if args.eval_episodes:
         ev = evaluate(policy_dir, None if args.skip_sb3 else run_dir, args.eval_episodes)
