@@ -21,8 +21,8 @@ collect of ``n_envs train_freq`` steps).
 
 ``--algo sac`` (``td3``) trains the shipped recipe (``agents/config/hyperparams/sac.yaml``, ``td3.yaml``) with
 the jitted trainer (``agents.training.jax.sac``, ``.td3``) and, in the child, through the same SB3 entry, which
-uses SBX when the ``jax`` extra is installed (``agents.training.algos``; the record's ``sb3.library``); SBX's XLA runs on one
-thread too (the child inherits ``PJRT_NPROC`` / ``XLA_FLAGS``; ``train(threads=1)``).
+uses SBX when the ``jax`` extra is installed (``agents.training.algos``; the record's ``sb3.library``); SBX's XLA
+runs on one thread too (the child inherits ``PJRT_NPROC`` / ``XLA_FLAGS``; ``train(threads=1)``).
 
 ``--steps 16384`` is a smoke test (a few minutes with compilation). The JSON record is written only with
 ``--out`` (an existing file is kept unless ``--overwrite``). Measured on a machine shared with other

@@ -270,7 +270,8 @@ def test_export_tanh_policy_matches_jax_and_old_ppo_files_load(tiny, tmp_path):
         NumpyPolicy.from_arrays(pol.arrays, dict(pol.meta, kind="softmax"))
 
 
-@pytest.mark.parametrize("bad, name", [({"policy_delay": 2}, "policy_delay"), ({"sde_sample_freq": 4}, "sde_sample_freq"),
+@pytest.mark.parametrize("bad, name", [({"policy_delay": 2}, "policy_delay"),
+                                       ({"sde_sample_freq": 4}, "sde_sample_freq"),
                                        ({"policy_kwargs": {"log_std_init": -3}}, "log_std_init"),
                                        ({"train_freq": [1, "episode"]}, "train_freq"),
                                        ({"ent_coef": "auto_-1"}, "ent_coef")])

@@ -1,25 +1,26 @@
 """``dobs-envs train --trainer jax``: one jitted PPO (:mod:`.ppo`), SAC (:mod:`.sac`) or TD3 (:mod:`.td3`) run.
 
-:func:`train_jax` resolves the same recipe as SB3 PPO / SBX SAC / SBX TD3 (:func:`agents.training.recipes.resolve_recipe`,
-overrides merged), compiles the whole run as one function (the algorithm's ``make_train``,
-``jax.random.PRNGKey(seed)``), runs it and writes into ``out`` (nothing pickled):
+:func:`train_jax` resolves the same recipe as SB3 PPO / SBX SAC / SBX TD3
+(:func:`agents.training.recipes.resolve_recipe`, overrides merged), compiles the whole run as one function (the
+algorithm's ``make_train``, ``jax.random.PRNGKey(seed)``), runs it and writes into ``out`` (nothing pickled):
 
 - ``policy.npz`` + ``policy.json``: the exported deterministic policy (:func:`.export.save_policy`; acted by
   :class:`.numpy_policy.NumpyPolicy`, numpy only);
-- ``curve.json``: the learning curve in the format of :mod:`agents.training.curves` (what the benchmark reads
-  for SB3 runs): ``{"seeds", "paper_cost", "points": [{"env_steps", "cost_ratio"}]}``, the cost ratio
-  ``J_policy / J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the
-  task's own compiled environment, of the policy kept after evenly spaced updates (the run's snapshots,
-  ``make_train``'s ``snapshots``; the first point is the initial policy), evaluated after the run; an update is
-  PPO's rollout of ``n_envs n_steps`` steps, SAC's (TD3's) collect of ``n_envs train_freq`` steps and its gradient steps;
-- ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the
-  training episodes that ended in the rollout, their count; PPO: approximate KL, value loss; SAC: critic and
-  actor losses, entropy coefficient; TD3: critic and actor losses; ``null`` where no episode ended or nothing was learnt yet);
+- ``curve.json``: the learning curve in the format of :mod:`agents.training.curves` (what the benchmark reads for
+  SB3 runs): ``{"seeds", "paper_cost", "points": [{"env_steps", "cost_ratio"}]}``, the cost ratio ``J_policy /
+  J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the task's own compiled
+  environment, of the policy kept after evenly spaced updates (the run's snapshots, ``make_train``'s ``snapshots``;
+  the first point is the initial policy), evaluated after the run; an update is PPO's rollout of ``n_envs n_steps``
+  steps, SAC's (TD3's) collect of ``n_envs train_freq`` steps and its gradient steps;
+- ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the training
+  episodes that ended in the rollout, their count; PPO: approximate KL, value loss; SAC: critic and actor losses,
+  entropy coefficient; TD3: critic and actor losses; ``null`` where no episode ended or nothing was learnt yet);
 - ``config.json``: ``trainer: "jax"``, ``library`` (:data:`agents.training.jax.LIBRARY`) and ``library_version``
   (dobs-envs'), ``jax_version``, ``jaxlib_version``, ``optax_version``, the env and its JAX id, the recipe
-  (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the
-  budget), ``n_updates``, ``rollout`` (env steps per update), the times (``setup_seconds``, ``compile_seconds`` / ``compile_cpu_seconds``,
-  ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and ``status``.
+  (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the budget),
+  ``n_updates``, ``rollout`` (env steps per update), the times (``setup_seconds``, ``compile_seconds`` /
+  ``compile_cpu_seconds``, ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and
+  ``status``.
 
 CPU times are this process's (``time.process_time``), wall times ``time.perf_counter``.
 """
@@ -131,7 +132,8 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     ----------
     env : a name of the JAX environments or its Gymnasium id (:func:`jax_env`; the run records the name).
     timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole updates (PPO: rollouts of
-        ``n_envs * n_steps`` steps; SAC, TD3: collects of ``n_envs * train_freq``; ``timesteps_done >= timesteps``, as SB3).
+        ``n_envs * n_steps`` steps; SAC, TD3: collects of ``n_envs * train_freq``; ``timesteps_done >= timesteps``,
+        as SB3).
     algo : ``"ppo"``, ``"sac"`` or ``"td3"`` (:data:`agents.training.jax.ALGOS`).
     hyperparams : overrides merged over the recipe (``agents/config/hyperparams/<algo>.yaml``).
     threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).

@@ -54,21 +54,21 @@ Deliberate differences from SBX (and SB3's loop):
 - the buffer is float32 for observations and rewards (SB3's: the observation space's dtype, float32 here,
   and float32 rewards); statistics in the environment's dtype as :mod:`.normalize`;
 - not implemented (refused by name): ``policy_delay``, ``n_steps`` (n-step returns), ``qf_learning_rate``,
-  ``sde_sample_freq``, ``use_sde_at_warmup``, ``action_noise``, dropout / layer norm, ``param_resets``,
+  ``sde_sample_freq``, ``use_sde_at_warmup``, action noise (``noise_type``), dropout / layer norm, ``param_resets``,
   ``target_update_interval``, ``optimize_memory_usage``, a ``train_freq`` in episodes.
 
-Why not rejax 0.1.3's ``SAC`` (``/work/venv-jc``, read from its source and measured on tracking, 20k env
-steps, 8 copies, 2 gradient steps of 256 per vector step, [64, 64] ReLU, obs + reward normalisation, one
-XLA thread, rejax's evaluations switched off, two alternating pairs on the shared 2-core machine at load
-~5: run 7.2 / 8.9 s CPU against this trainer's 5.6 / 5.9 s, compile 16 / 18 s against 17 / 20 s; no
-speed reason either way): it cannot express the shipped recipe. Its learning rate is a constant (the recipe: ``lin_1e-3``) shared with the temperature, whose
-loss it takes on ``alpha`` instead of ``log alpha``; it clips every gradient element (``optax.clip``); it
-collects one vector step per iteration (no ``train_freq``), updates the target once per vector step
-instead of once per gradient step, and has no held exploration noise (``use_sde``) and no initial random
-actions; it updates the actor before the critics; it treats the 400-step truncation as termination (no
-bootstrap) and stores the auto-reset observation as the next one; its normalisers do not clip (the
-recipe: ``clip_obs = clip_reward = 10``). It also needs distrax (tfp-nightly) and gymnax 1.0
-(``gymnasium < 1.4``), which conflict with the main environment (see :mod:`.ppo`).
+Why not rejax 0.1.3's ``SAC`` (in the heavy-clients environment; read from its source and measured on tracking,
+20k env steps, 8 copies, 2 gradient steps of 256 per vector step, [64, 64] ReLU, obs + reward normalisation, one
+XLA thread, rejax's evaluations switched off, two alternating pairs on the shared 2-core machine at load ~5: run
+7.2 / 8.9 s CPU against this trainer's 5.6 / 5.9 s, compile 16 / 18 s against 17 / 20 s; no speed reason either
+way): it cannot express the shipped recipe. Its learning rate is a constant (the recipe: ``lin_1e-3``) shared
+with the temperature, whose loss it takes on ``alpha`` instead of ``log alpha``; it clips every gradient element
+(``optax.clip``); it collects one vector step per iteration (no ``train_freq``), updates the target once per
+vector step instead of once per gradient step, and has no held exploration noise (``use_sde``) and no initial
+random actions; it updates the actor before the critics; it treats the 400-step truncation as termination (no
+bootstrap) and stores the auto-reset observation as the next one; its normalisers do not clip (the recipe:
+``clip_obs = clip_reward = 10``). It also needs distrax (tfp-nightly) and gymnax 1.0 (``gymnasium < 1.4``),
+which conflict with the main environment (see :mod:`.ppo`).
 
 The hyperparameters are the recipe's keys (``agents.training.recipes.resolve_recipe("sac", env).hyperparams``),
 read by :func:`sac_config`.
@@ -89,7 +89,8 @@ from .policy import ACTIVATIONS
 from .ppo import _pos_int, _schedule
 
 __all__ = ["SACConfig", "HPARAMS", "RECIPE_KEYS", "sac_config", "make_env", "make_train", "init_params",
-           "actor_dist", "tanh_log_prob", "standard_normal", "q_values", "critic_loss", "actor_loss", "alpha_loss", "polyak",
+           "actor_dist", "tanh_log_prob", "standard_normal", "q_values", "critic_loss", "actor_loss", "alpha_loss",
+           "polyak",
            "init_opts", "update_step", "ring_init", "ring_write", "sample_indices", "offpolicy_fields",
            "offpolicy_train", "SACHooks"]
 
