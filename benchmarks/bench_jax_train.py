@@ -183,6 +183,33 @@ def binned(episodes: list, rollout: int, n_bins: int) -> tuple[np.ndarray, np.nd
     return count, total
 
 
+#: the stored curves keep at most this many bins (SAC / TD3 collect every 32 / 8 steps: consecutive collects merged)
+MAX_STORED_BINS = 200
+
+
+def coarsen(record: dict) -> dict:
+    """``record`` with its per-rollout curves (``jax.curve``, ``sb3_curve``) merged into at most
+    :data:`MAX_STORED_BINS` bins of consecutive rollouts (episode counts and return sums added, ``steps`` the
+    last of each bin; ``curve_bin_rollouts`` records the factor): the file stays small for off-policy runs."""
+    curve = record["jax"]["curve"]
+    n = len(curve["steps"])
+    k = -(-n // MAX_STORED_BINS)
+    record["curve_bin_rollouts"] = k
+    if k == 1:
+        return record
+
+    def add(xs):
+        return [float(sum(xs[i:i + k])) for i in range(0, n, k)]
+
+    record["jax"]["curve"] = {"steps": [curve["steps"][min(i + k, n) - 1] for i in range(0, n, k)],
+                              "episodes": [int(x) for x in add(curve["episodes"])],
+                              "return_sum": add(curve["return_sum"])}
+    if "sb3_curve" in record:
+        record["sb3_curve"] = {"episodes": [int(x) for x in add(record["sb3_curve"]["episodes"])],
+                               "return_sum": add(record["sb3_curve"]["return_sum"])}
+    return record
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--algo", choices=("ppo", "sac", "td3"), default="ppo",
@@ -266,7 +293,7 @@ def main(argv=None) -> int:
     if args.out:
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         with open(args.out, "w") as fh:
-            json.dump(record, fh, indent=1)
+            json.dump(coarsen(record), fh, indent=1)
         print(f"wrote {args.out}")
     return 0
 
