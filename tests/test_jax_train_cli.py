@@ -106,7 +106,8 @@ def test_evaluate_scores_the_jitted_run_with_the_harness(jax_run, tmp_path, caps
 
 
 @pytest.mark.parametrize("extra, names", [
-    (["--algo", "sac"], ["--algo", "ppo"]),
+    (["--algo", "crossq"], ["--algo", "ppo | sac | td3", "crossq"]),
+    (["--multi-agent", "--algo", "sac"], ["--algo sac", "ppo"]),
     (["--hybrid", "residual"], ["--hybrid"]),
     (["--resume", "runs/x"], ["--resume"]),
     (["--checkpoint-freq", "0"], ["--checkpoint-freq"]),

@@ -43,8 +43,8 @@ _NOT_JAX = (("resume", "--resume", lambda v: v is not None), ("hybrid", "--hybri
             ("tensorboard", "--tensorboard", lambda v: v is not None),
             ("checkpoint_freq", "--checkpoint-freq", lambda v: v is not None),
             ("allow_custom_env", "--allow-custom-env", bool), ("verbose", "--verbose", bool))
-_JAX_OPTIONS = ("--algo ppo, --multi-agent, --env, --timesteps, --seed, --out, --hyperparams, --recipe, --threads, "
-                "--overwrite, --no-progress")
+_JAX_OPTIONS = ("--algo ppo | sac | td3, --multi-agent (ppo), --env, --timesteps, --seed, --out, --hyperparams, "
+                "--recipe, --threads, --overwrite, --no-progress")
 
 #: the options that define a run (argparse dest, option, config.json key); --resume checks them
 _RUN_OPTIONS = (("env", "--env", "env"), ("algo", "--algo", "algo"), ("multi_agent", "--multi-agent", "multi_agent"),

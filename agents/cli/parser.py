@@ -26,8 +26,9 @@ def add_parser(sub) -> None:
                         "extra is installed, else with stable-baselines3 / sb3-contrib)")
     p.add_argument("--trainer", choices=TRAINERS, default="sb3",
                    help="sb3 (default): Stable-Baselines3 / SBX on the compiled envs; jax: the jitted trainer "
-                        "(agents.training.jax: the whole run one compiled function on dobs_envs.jax; --algo ppo, with "
-                        "--multi-agent one policy shared by the controller nodes; exports policy.npz + policy.json)")
+                        "(agents.training.jax: the whole run one compiled function on dobs_envs.jax; --algo ppo | sac | "
+                        "td3, with --multi-agent (ppo) one policy shared by the controller nodes; exports policy.npz + "
+                        "policy.json)")
     p.add_argument("--multi-agent", action="store_true", default=None,
                    help="one policy shared by all controller nodes on the PettingZoo env (ppo, sac; --trainer jax: ppo)")
     p.add_argument("--timesteps", type=_positive_int, default=None,

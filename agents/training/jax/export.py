@@ -1,4 +1,4 @@
-"""Writing a trained PPO policy as plain files (``policy.npz`` + ``policy.json``, no pickle).
+"""Writing a jitted run's trained policy (PPO or SAC) as plain files (``policy.npz`` + ``policy.json``, no pickle).
 
 :func:`save_policy` writes what :class:`agents.training.jax.numpy_policy.NumpyPolicy` loads (the map
 from observations to inputs is stated there); :func:`jax_act` is the same map in JAX on the trainer's
@@ -38,16 +38,27 @@ def _action_map(cfg: PPOConfig, env, env_params) -> tuple[np.ndarray, np.ndarray
     return low, high, scale
 
 
+def _kind(cfg) -> str:
+    """The exported policy's ``kind`` (:mod:`.numpy_policy`): ``cfg.POLICY_KIND`` ("tanh": SAC), else "clip" (PPO)."""
+    return getattr(cfg, "POLICY_KIND", "clip")
+
+
 def jax_act(result: dict, cfg: PPOConfig, hparams: dict, env, env_params):
-    """The deterministic policy of one run in JAX: ``obs (..., D) -> u (..., m)`` (float32 network)."""
+    """The deterministic policy of one run in JAX: ``obs (..., D) -> u (..., m)`` (float32 network); ``cfg`` a
+    :class:`~.ppo.PPOConfig` (the clipped mean) or a :class:`~.sac.SACConfig` (``tanh`` of the mean, onto the
+    bounds)."""
     low, high, scale = (jnp.asarray(x, jnp.float32) for x in _action_map(cfg, env, env_params))
     rms = nz.RunningMeanStd(result["obs_mean"], result["obs_var"], result["obs_count"])
-    params = result["params"]
+    params = {k: v for k, v in result["params"].items() if k.startswith("pi_")}
+    tanh = _kind(cfg) == "tanh"
 
     @jax.jit
     def act(obs):
         o = nz.normalize_obs(rms, obs, hparams["clip_obs"], hparams["norm_epsilon"]) if cfg.norm_obs else obs
-        return jnp.clip(pol.actor_mean(params, o.astype(jnp.float32), cfg.activation), low, high) * scale
+        mu = pol.actor_mean(params, o.astype(jnp.float32), cfg.activation)
+        if tanh:
+            return (low + 0.5 * (jnp.tanh(mu) + 1.0) * (high - low)) * scale
+        return jnp.clip(mu, low, high) * scale
 
     return act
 
@@ -70,11 +81,12 @@ def policy_arrays(result: dict, cfg: PPOConfig, hparams: dict, env, env_params, 
     arrays = {k: np.asarray(v) for k, v in result["params"].items() if k.startswith("pi_")}
     arrays.update(obs_mean=np.asarray(result["obs_mean"]), obs_var=np.asarray(result["obs_var"]),
                   action_low=low, action_high=high, action_scale=scale)
-    meta = {"format": FORMAT, "env_id": cfg.env_id, "obs_dim": int(arrays["pi_w0"].shape[0]),
+    meta = {"format": FORMAT, "kind": _kind(cfg), "env_id": cfg.env_id, "obs_dim": int(arrays["pi_w0"].shape[0]),
             "act_dim": int(low.shape[0]), "net_arch": list(cfg.net_arch), "activation": cfg.activation,
             "norm_obs": cfg.norm_obs, "clip_obs": float(hparams["clip_obs"]),
             "epsilon": float(hparams["norm_epsilon"]), "normalize_actions": cfg.normalize_actions,
-            "trainer": "agents.training.jax.ppo", "library": "jax", "library_version": _version("jax"),
+            "trainer": getattr(cfg, "TRAINER", "agents.training.jax.ppo"), "library": "jax",
+            "library_version": _version("jax"),
             "optax_version": _version("optax"), "env_kwargs": cfg.env_kwargs, "extra": extra or {}}
     return arrays, meta
 

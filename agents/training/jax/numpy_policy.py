@@ -1,16 +1,19 @@
-"""The exported PPO policy as a plain numpy callable (imports numpy only: no JAX needed to act).
+"""The exported policy of a jitted run as a plain numpy callable (imports numpy only: no JAX needed to act).
 
 A directory written by :func:`agents.training.jax.export.save_policy` holds ``policy.npz`` (the actor's
 arrays ``pi_w{i}`` ``(in, out)``, ``pi_b{i}``, the observation statistics ``obs_mean``, ``obs_var`` and the
 action map ``action_low``, ``action_high``, ``action_scale``; read with ``allow_pickle=False``) and
-``policy.json`` (``format``, sizes, activation, normaliser constants, provenance). :class:`NumpyPolicy`
+``policy.json`` (``format``, ``kind``, sizes, activation, normaliser constants, provenance). :class:`NumpyPolicy`
 computes, in float64::
 
     o_n = clip((o - mean) / sqrt(var + epsilon), -clip_obs, clip_obs)     (VecNormalize, if norm_obs)
-    a   = clip(mu(o_n), low, high)                                          (the mean action, clipped)
+    a   = clip(mu(o_n), low, high)                  kind "clip" (PPO: the Gaussian's mean, clipped)
+    a   = low + (tanh(mu(o_n)) + 1) (high - low) / 2    kind "tanh" (SAC: the squashed Gaussian's mode,
+                                                     mapped from [-1, 1] onto the bounds)
     u   = a * action_scale                                                  (normalized_actions scaling)
 
-with ``mu`` the actor MLP (:func:`numpy_actor_mean`, the reference of
+Files of the first format (``dobs_envs.jax_ppo_policy/1``, PPO only, no ``kind``) load as kind ``"clip"``.
+``mu`` is the actor MLP (:func:`numpy_actor_mean`, the reference of
 :func:`agents.training.jax.policy.actor_mean`). ``u`` is an action of ``gymnasium.make(env_id)`` with its
 default ``normalized_actions=False`` (its action space is the input bounds).
 """
@@ -23,10 +26,14 @@ import numpy as np
 
 from . import POLICY_FILES
 
-__all__ = ["FORMAT", "NUMPY_ACTIVATIONS", "NumpyPolicy", "numpy_actor_mean"]
+__all__ = ["FORMAT", "READ_FORMATS", "KINDS", "NUMPY_ACTIVATIONS", "NumpyPolicy", "numpy_actor_mean"]
 
 #: the ``format`` field of ``policy.json``
-FORMAT = "dobs_envs.jax_ppo_policy/1"
+FORMAT = "dobs_envs.jax_policy/2"
+#: the formats read: the first one (PPO's, before SAC) has no ``kind`` and is a "clip" policy
+READ_FORMATS = (FORMAT, "dobs_envs.jax_ppo_policy/1")
+#: ``kind`` -> the map from the actor's output to the action (see the module doc)
+KINDS = ("clip", "tanh")
 _FILES = POLICY_FILES
 
 #: activation names -> numpy functions (the same names as :data:`agents.training.jax.policy.ACTIVATIONS`)
@@ -75,9 +82,12 @@ class NumpyPolicy:
         return self
 
     def _check(self, arrays: dict, meta: dict, arrays_src: str, meta_src: str) -> None:
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        if not isinstance(meta, dict) or meta.get("format") not in READ_FORMATS:
             raise ValueError(f"{meta_src}: format {meta.get('format') if isinstance(meta, dict) else meta!r} is not "
-                             f"{FORMAT!r}")
+                             f"one of {list(READ_FORMATS)}")
+        meta.setdefault("kind", "clip")
+        if meta["kind"] not in KINDS:
+            raise ValueError(f"{meta_src}: kind must be one of {list(KINDS)}, got {meta['kind']!r}")
         if meta.get("activation") not in NUMPY_ACTIVATIONS:
             raise ValueError(f"{meta_src}: activation must be one of {list(NUMPY_ACTIVATIONS)}, got "
                              f"{meta.get('activation')!r}")
@@ -102,4 +112,7 @@ class NumpyPolicy:
             c = self.meta["clip_obs"]
             o = np.clip((o - a["obs_mean"]) / np.sqrt(a["obs_var"] + self.meta["epsilon"]), -c, c)
         mu = numpy_actor_mean(a, o, self.meta["activation"])
-        return np.clip(mu, a["action_low"], a["action_high"]) * a["action_scale"]
+        low, high = a["action_low"], a["action_high"]
+        if self.meta["kind"] == "tanh":
+            return (low + 0.5 * (np.tanh(mu) + 1.0) * (high - low)) * a["action_scale"]
+        return np.clip(mu, low, high) * a["action_scale"]

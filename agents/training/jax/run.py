@@ -1,24 +1,26 @@
-"""``dobs-envs train --trainer jax``: one jitted PPO run (:mod:`.ppo`) written as a run directory.
+"""``dobs-envs train --trainer jax``: one jitted PPO (:mod:`.ppo`), SAC (:mod:`.sac`) or TD3 (:mod:`.td3`) run.
 
-:func:`train_jax` resolves the same recipe as SB3 PPO (:func:`agents.training.recipes.resolve_recipe`, overrides
-merged), compiles the whole run as one function (:func:`.ppo.make_train`, ``jax.random.PRNGKey(seed)``), runs it and
-writes into ``out`` (nothing pickled):
+:func:`train_jax` resolves the same recipe as SB3 PPO / SBX SAC / SBX TD3
+(:func:`agents.training.recipes.resolve_recipe`, overrides merged), compiles the whole run as one function (the
+algorithm's ``make_train``, ``jax.random.PRNGKey(seed)``), runs it and writes into ``out`` (nothing pickled):
 
 - ``policy.npz`` + ``policy.json``: the exported deterministic policy (:func:`.export.save_policy`; acted by
   :class:`.numpy_policy.NumpyPolicy`, numpy only);
-- ``curve.json``: the learning curve in the format of :mod:`agents.training.curves` (what the benchmark reads
-  for SB3 runs): ``{"seeds", "paper_cost", "points": [{"env_steps", "cost_ratio"}]}``, the cost ratio
-  ``J_policy / J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the
-  task's own compiled environment, of the policy kept after evenly spaced updates (the run's snapshots,
-  :func:`.ppo.make_train`'s ``snapshots``; the first point is the initial policy), evaluated after the run;
-- ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the
-  training episodes that ended in the rollout, their count, approximate KL, value loss; ``null`` where no
-  episode ended);
+- ``curve.json``: the learning curve in the format of :mod:`agents.training.curves` (what the benchmark reads for
+  SB3 runs): ``{"seeds", "paper_cost", "points": [{"env_steps", "cost_ratio"}]}``, the cost ratio ``J_policy /
+  J_paper`` per learning-curve episode (seeds from :data:`CURVE_SEED`, the tuning range) on the task's own compiled
+  environment, of the policy kept after evenly spaced updates (the run's snapshots, ``make_train``'s ``snapshots``;
+  the first point is the initial policy), evaluated after the run; an update is PPO's rollout of ``n_envs n_steps``
+  steps, SAC's (TD3's) collect of ``n_envs train_freq`` steps and its gradient steps;
+- ``train_curve.json``: the trainer's own per-update figures (env steps, mean raw return and length of the training
+  episodes that ended in the rollout, their count; PPO: approximate KL, value loss; SAC: critic and actor losses,
+  entropy coefficient; TD3: critic and actor losses; ``null`` where no episode ended or nothing was learnt yet);
 - ``config.json``: ``trainer: "jax"``, ``library`` (:data:`agents.training.jax.LIBRARY`) and ``library_version``
   (dobs-envs'), ``jax_version``, ``jaxlib_version``, ``optax_version``, the env and its JAX id, the recipe
-  (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the
-  budget), ``n_updates``, the times (``setup_seconds``, ``compile_seconds`` / ``compile_cpu_seconds``,
-  ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and ``status``.
+  (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the budget),
+  ``n_updates``, ``rollout`` (env steps per update), the times (``setup_seconds``, ``compile_seconds`` /
+  ``compile_cpu_seconds``, ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and
+  ``status``.
 
 CPU times are this process's (``time.process_time``), wall times ``time.perf_counter``.
 """
@@ -86,6 +88,15 @@ def _plain(x):
     return [None if isinstance(v, float) and math.isnan(v) else v for v in np.asarray(x).tolist()]
 
 
+#: per algorithm: (module, its recipe reader)
+_ALGO_MODULES = {"ppo": ("ppo", "ppo_config"), "sac": ("sac", "sac_config"), "td3": ("td3", "td3_config")}
+
+
+def _rollout(cfg) -> int:
+    """Env steps per update: SAC's ``rollout`` (``n_envs train_freq``), PPO's ``n_envs n_steps``."""
+    return int(getattr(cfg, "rollout", None) or cfg.n_envs * cfg.n_steps)
+
+
 def _curve(snapshots: dict, updates: list, rollout: int, cfg, hp, env, env_params, env_name: str,
            seeds: list) -> dict:
     """``curve.json``'s document: every snapshot's policy on the task's own compiled env (the harness of
@@ -120,16 +131,18 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     Parameters
     ----------
     env : a name of the JAX environments or its Gymnasium id (:func:`jax_env`; the run records the name).
-    timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole rollouts of
-        ``n_envs * n_steps`` steps (``timesteps_done >= timesteps``, as SB3).
-    hyperparams : overrides merged over the recipe (``agents/config/hyperparams/ppo.yaml``).
+    timesteps : env steps (default: the recipe's ``n_timesteps``); the run takes whole updates (PPO: rollouts of
+        ``n_envs * n_steps`` steps; SAC, TD3: collects of ``n_envs * train_freq``; ``timesteps_done >= timesteps``,
+        as SB3).
+    algo : ``"ppo"``, ``"sac"`` or ``"td3"`` (:data:`agents.training.jax.ALGOS`).
+    hyperparams : overrides merged over the recipe (``agents/config/hyperparams/<algo>.yaml``).
     threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
     progress : one line on stderr per phase (compile, run, curve).
     curve_points, curve_seeds : the learning curve's points after the initial one (:func:`curve_updates`) and its
         episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).
 
     Errors (before ``out`` is touched): :class:`JaxRunError` for an algorithm, env or hyperparameter the
-    trainer does not implement (:func:`.ppo.ppo_config` names the key);
+    trainer does not implement (:func:`.ppo.ppo_config`, :func:`.sac.sac_config`, :func:`.td3.td3_config` name the key);
     :class:`agents.config.hyperparam_files.HyperparamsError` from the recipe files.
 
     An env with communication faults on by default (tracking_lossy) needs 64-bit JAX for its fault
@@ -145,26 +158,31 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     env, gid = jax_env(env)
     xla_threads(threads)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
+    import importlib
+
     import jax
 
     from dobs_envs.registry import ENVIRONMENTS
 
     from ..recipes import resolve_recipe
     from .export import save_policy
-    from .ppo import make_env, make_train, ppo_config
+
+    module_name, config_name = _ALGO_MODULES[algo]
+    module = importlib.import_module(f"{__package__}.{module_name}")
+    make_env, make_train, read_config = module.make_env, module.make_train, getattr(module, config_name)
 
     def say(msg: str) -> None:
         if progress:
-            print(f"[jax ppo {env}] {msg}", file=sys.stderr, flush=True)
+            print(f"[jax {algo} {env}] {msg}", file=sys.stderr, flush=True)
 
     if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
         # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
-        # (docs/jax.md); the run still simulates and trains in float32 (ppo_config's dtype)
+        # (docs/jax.md); the run still simulates and trains in float32 (the config's dtype)
         jax.config.update("jax_enable_x64", True)
     recipe = resolve_recipe(algo, env, overrides=hyperparams)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
-        cfg, hp = ppo_config(recipe.hyperparams, gid, total_timesteps=timesteps)
+        cfg, hp = read_config(recipe.hyperparams, gid, total_timesteps=timesteps)
         env_jax, env_params = make_env(cfg)
     except ValueError as exc:
         raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
@@ -177,7 +195,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
         "env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "seed": int(seed),
         "key": f"jax.random.PRNGKey({int(seed)})", "timesteps": timesteps, "timesteps_done": 0,
-        "n_updates": cfg.n_updates, "rollout": cfg.n_envs * cfg.n_steps, "n_agents": 1,
+        "n_updates": cfg.n_updates, "rollout": _rollout(cfg), "n_agents": 1,
         "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
         "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams),
         "policy": "policy.npz", "curve_seeds": seeds,
@@ -187,7 +205,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     clear_run(out)
     write_json_atomic(os.path.join(out, "config.json"), config)
 
-    say(f"compiling {cfg.n_updates} updates of {cfg.n_envs} x {cfg.n_steps} steps ...")
+    say(f"compiling {cfg.n_updates} updates of {_rollout(cfg)} env steps ...")
     w0, c0 = time.perf_counter(), time.process_time()
     compiled = train.lower(key, hp).compile()
     compile_s, compile_cpu = time.perf_counter() - w0, time.process_time() - c0
@@ -200,7 +218,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     save_policy(out, result, cfg, hp, env_jax, env_params, overwrite=True,
                 extra={"seed": int(seed), "timesteps": timesteps, "timesteps_done": cfg.steps_done})
     w0 = time.perf_counter()
-    curve = _curve(result["snapshots"], updates, cfg.n_envs * cfg.n_steps, cfg, hp, env_jax, env_params, env, seeds)
+    curve = _curve(result["snapshots"], updates, _rollout(cfg), cfg, hp, env_jax, env_params, env, seeds)
     write_json_atomic(os.path.join(out, "curve.json"), curve)
     c = result["curve"]
     write_json_atomic(os.path.join(out, "train_curve.json"), {k: _plain(v) for k, v in c.items()})
