@@ -27,7 +27,9 @@ are measured the same way:
   ``gym.make_vec(env_id, num_envs=B, threads=1)`` env-steps/s, and the simulation kernel alone
   (``control_period_compiled``, NE2, 50 Euler steps per period, B = 1 and B), best of ``--repeats`` runs of
   about ``--seconds`` each, interleaved (base, head, head, base, ...: the order alternates): only
-  ratios measured this way mean anything on a shared machine. ``--clock cpu`` times each run by
+  ratios measured this way mean anything on a shared machine. ``--pairs K`` repeats this with K fresh pairs
+  of worker processes and reports each pair's ratios and their median (the machine code of a compiled
+  kernel, and with it its speed, varies from process to process by more than a few per cent). ``--clock cpu`` times each run by
   the worker's CPU time instead of the wall clock (on a machine busy with other work: the time the
   worker computes, not the time it waits for a core; all runs are single-threaded).
 """
@@ -363,11 +365,16 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seconds", type=float, default=0.4, help="length of one timed run")
     ap.add_argument("--batch", type=int, default=1024)
+    ap.add_argument("--pairs", type=int, default=1,
+                    help="pairs of worker processes timed one after the other (--speed): the ratio of each pair and "
+                         "their median (the speed of a compiled kernel varies from process to process)")
     ap.add_argument("--env-id", default="dobs_envs/Tracking-v0")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                     help="time runs by the wall clock or by the worker's CPU time (process_time: on a loaded "
                          "machine, not the time the worker waits for a core; single-threaded runs only)")
     args = ap.parse_args(argv)
+    if args.pairs < 1 or args.repeats < 1:
+        ap.error(f"--pairs and --repeats must be positive integers, got {args.pairs} and {args.repeats}")
     speed = args.speed or not args.digest
     with contextlib.ExitStack() as stack:
         try:
@@ -392,32 +399,57 @@ def _compare(args, speed, paths):
         print(f"bit for bit: {same} of {len(dig['base'])} runs identical")
         status = 0 if same == len(dig["base"]) else 1
     if speed:
-        for w in workers.values():
-            w.ask("setup", args.env_id, args.batch, args.clock)
-        steps = {}
-        for k, w in workers.items():  # calibrate run lengths on the base
-            steps[k, "single"] = max(3, int(w.ask("single", 300) * args.seconds))
-            steps[k, "vec"] = max(3, int(w.ask("vec", 3) / args.batch * args.seconds))
-            steps[k, "sim1"] = max(3, int(w.ask("sim1", 300) * args.seconds))
-            steps[k, "simB"] = max(3, int(w.ask("simB", 3) / args.batch * args.seconds))
-        for key in steps:
-            steps[key] = steps["base", key[1]]
-        best = dict.fromkeys(steps, 0.0)
-        order = list(workers.items())
-        for rep in range(args.repeats):  # interleaved, the order of the two checkouts alternating
-            for what in ("single", "vec", "sim1", "simB"):
-                for k, w in (order if rep % 2 == 0 else order[::-1]):
-                    best[k, what] = max(best[k, what], w.ask(what, steps[k, what]))
-        print(f"{args.env_id}, best of {args.repeats} interleaved runs of ~{args.seconds:g} s ({args.clock} clock)")
-        for what, label in (("single", "gym single env (steps/s)"), ("vec", f"vector B={args.batch} threads=1 (env-steps/s)"),
-                            ("sim1", "NE2 control period B=1 (periods/s)"),
-                            ("simB", f"NE2 control period B={args.batch} (copy-periods/s)")):
-            b, hd = best["base", what], best["head", what]
-            print(f"  {label:40s} base {b:12,.0f}  head {hd:12,.0f}  head/base {hd / b:.3f}")
+        ratios = {what: [] for what, _ in SPEED_RUNS}
+        for pair in range(args.pairs):
+            if pair:  # a fresh pair of worker processes (the numba caches are warm by now)
+                for w in workers.values():
+                    w.close()
+                workers = {k: Worker(path) for k, path in paths.items()}
+            best = _speed_pair(args, workers, pair)
+            print(f"{args.env_id}, pair {pair + 1} of {args.pairs}: best of {args.repeats} interleaved runs of "
+                  f"~{args.seconds:g} s ({args.clock} clock)")
+            for what, label in SPEED_RUNS:
+                b, hd = best["base", what], best["head", what]
+                ratios[what].append(hd / b)
+                print(f"  {label.format(B=args.batch):40s} base {b:12,.0f}  head {hd:12,.0f}  head/base {hd / b:.3f}")
+        if args.pairs > 1:
+            import statistics
+
+            print(f"head/base over {args.pairs} pairs of processes: median [min, max]")
+            for what, label in SPEED_RUNS:
+                r = ratios[what]
+                print(f"  {label.format(B=args.batch):40s} {statistics.median(r):.3f} [{min(r):.3f}, {max(r):.3f}]  "
+                      + " ".join(f"{x:.3f}" for x in r))
     for w in workers.values():
         w.close()
     return status
 
+
+#: the timed runs of ``--speed``: (worker command, label)
+SPEED_RUNS = (("single", "gym single env (steps/s)"), ("vec", "vector B={B} threads=1 (env-steps/s)"),
+              ("sim1", "NE2 control period B=1 (periods/s)"), ("simB", "NE2 control period B={B} (copy-periods/s)"))
+
+
+def _speed_pair(args, workers, pair):
+    """Best rates of one pair of worker processes, interleaved, the order of the checkouts alternating
+    (starting with the base in even pairs, the head in odd ones)."""
+    for w in workers.values():
+        w.ask("setup", args.env_id, args.batch, args.clock)
+    steps = {}
+    for k, w in workers.items():  # calibrate run lengths on the base
+        steps[k, "single"] = max(3, int(w.ask("single", 300) * args.seconds))
+        steps[k, "vec"] = max(3, int(w.ask("vec", 3) / args.batch * args.seconds))
+        steps[k, "sim1"] = max(3, int(w.ask("sim1", 300) * args.seconds))
+        steps[k, "simB"] = max(3, int(w.ask("simB", 3) / args.batch * args.seconds))
+    for key in steps:
+        steps[key] = steps["base", key[1]]
+    best = dict.fromkeys(steps, 0.0)
+    order = list(workers.items())
+    for rep in range(args.repeats):  # interleaved, the order of the two checkouts alternating
+        for what, _ in SPEED_RUNS:
+            for k, w in (order if (rep + pair) % 2 == 0 else order[::-1]):
+                best[k, what] = max(best[k, what], w.ask(what, steps[k, what]))
+    return best
 
 if __name__ == "__main__":
     sys.exit(main())
