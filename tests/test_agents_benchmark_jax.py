@@ -125,7 +125,8 @@ def test_second_invocation_reuses_the_stored_runs(first, second):
 
 def test_interrupted_run_is_retrained_alone_and_equals_its_vmapped_run(second, tmp_path):
     """A run without result.json (interrupted: config.json still 'running') is trained again, alone (one seed:
-    no vmap), the finished ones are kept; the single run equals the vmapped one up to float32 round-off (the
+    agents.training.jax.run.train_jax itself), the finished ones are kept; the single run equals the vmapped one
+    up to float32 round-off (the
     batched and the single program are compiled separately: last-bit differences in the weights, ~1e-8 measured,
     grow along the closed-loop episodes of the curve). The centralised agent only (one compilation; the shared
     trainer's vmapped seeds against single runs: tests/test_jax_ippo.py)."""
@@ -147,7 +148,9 @@ def test_interrupted_run_is_retrained_alone_and_equals_its_vmapped_run(second, t
     for key, t in before.items():
         assert (after[key] == t) == (key[:2] != (k, 1)), key  # only the interrupted run is written again
     cfg = json.load(open(os.path.join(d, "config.json")))
-    assert cfg["status"] == "complete" and "vmapped" not in cfg and cfg["seed"] == 1
+    assert cfg["status"] == "complete" and "vmapped" not in cfg and cfg["seed"] == 1  # train_jax's own run
+    res = json.load(open(os.path.join(d, "result.json")))
+    assert "train_seconds_shared" not in res and res["train_seconds"] == cfg["total_seconds"]
     new = np.load(os.path.join(d, "policy.npz"))
     assert sorted(new.files) == sorted(old)
     for name in new.files:

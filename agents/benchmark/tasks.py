@@ -98,9 +98,10 @@ def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
 def train_seeds_and_evaluate(specs: list[dict], scratch: str | None = None) -> list[dict]:
     """Train the runs ``specs`` of one jitted agent on one env (the same spec but for the seed) as ONE compiled
     run vmapped over their seeds (:func:`agents.training.jax.vmap_seeds.train_jax_seeds`), in a scratch
-    directory, and evaluate each: one record per run, as :func:`train_and_evaluate`'s. A run's ``train_seconds``
-    is its share, the whole task's training wall time (setup, compilation, the vmapped run, the learning curves)
-    divided by the number of seeds; ``train_seconds_shared`` records ``{"seconds": that time, "runs": seeds}``."""
+    directory, and evaluate each: one record per run, as :func:`train_and_evaluate`'s. A vmapped run's
+    ``train_seconds`` is its share, the whole task's training wall time (setup, compilation, the vmapped run, the
+    learning curves) divided by the number of seeds, and ``train_seconds_shared`` records ``{"seconds": that time,
+    "runs": seeds}``; a run trained alone (one seed) records its own ``total_seconds``."""
     from ..training.jax.vmap_seeds import train_jax_seeds
 
     first = specs[0]
@@ -112,17 +113,19 @@ def train_seeds_and_evaluate(specs: list[dict], scratch: str | None = None) -> l
     with tempfile.TemporaryDirectory(prefix="runs-", dir=scratch) as root:
         paths = [os.path.join(root, f"s{sp['seed']}") for sp in specs]
         t0 = time.perf_counter()
-        train_jax_seeds(first["env"], a.algo, multi_agent=a.multi_agent, seeds=[sp["seed"] for sp in specs],
-                        outs=paths, timesteps=first["steps"], hyperparams=_training_overrides(first) or None,
-                        threads=first["threads"], progress=False, curve_points=first["curve_points"],
-                        curve_seeds=first["curve_seeds"])
+        runs = train_jax_seeds(first["env"], a.algo, multi_agent=a.multi_agent, seeds=[sp["seed"] for sp in specs],
+                               outs=paths, timesteps=first["steps"], hyperparams=_training_overrides(first) or None,
+                               threads=first["threads"], progress=False, curve_points=first["curve_points"],
+                               curve_seeds=first["curve_seeds"])
         seconds = time.perf_counter() - t0
         records = []
-        for sp, path in zip(specs, paths):
+        for sp, path, run in zip(specs, paths, runs):
             with open(os.path.join(path, "curve.json")) as fh:
                 curve = json.load(fh)["points"]
-            result = _evaluate(sp, path, seconds / len(specs), curve)
-            result["train_seconds_shared"] = {"seconds": seconds, "runs": len(specs)}
+            shared = "vmapped" in run.config  # else trained alone (one seed, or no vmapped builder): its own time
+            result = _evaluate(sp, path, seconds / len(specs) if shared else run.config["total_seconds"], curve)
+            if shared:
+                result["train_seconds_shared"] = {"seconds": seconds, "runs": len(specs)}
             records.append({"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False})
     return records
 

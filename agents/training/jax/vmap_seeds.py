@@ -11,13 +11,17 @@ Times: the vmapped phases serve every seed at once, so a run's ``setup_seconds``
 by the number of seeds; ``curve_seconds`` is the run's own learning curve; ``total_seconds`` the sum of the run's
 shares and its own curve and export. ``config.json`` ``vmapped`` records the seeds sharing the run (``seeds``,
 ``runs``) and the whole figures (``setup_seconds``, ``compile_seconds``, ``compile_cpu_seconds``, ``train_seconds``,
-``train_cpu_seconds``). One seed: the run is :func:`.run.train_jax`'s (no vmap; the same program).
+``train_cpu_seconds``).
+
+One seed, or an algorithm of :data:`agents.training.jax.ALGOS` without a builder here (:data:`BUILDERS`): the seeds
+are trained one after another by :func:`.run.train_jax` / :func:`.run_marl.train_jax_marl` themselves (no vmap, no
+shared times), so every jitted algorithm has multi-seed runs and a vmapped builder is an optimisation.
 
 A vmapped seed's run equals its single run up to float32 round-off (the batched and the single program are compiled
 separately; tests/test_agents_benchmark_jax.py); a run is reproduced exactly by the same group of seeds.
 
-The algorithms: :data:`BUILDERS`, ``(algo, multi_agent) -> builder`` (a builder returns the :class:`VmapRun` of a
-recipe); an algorithm of :data:`agents.training.jax.ALGOS` gets vmapped seeds by one entry there.
+The vmapped algorithms: :data:`BUILDERS`, ``(algo, multi_agent) -> builder`` (a builder returns the
+:class:`VmapRun` of a recipe).
 """
 from __future__ import annotations
 
@@ -149,14 +153,20 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     ``seeds`` in one compiled function vmapped over them, and write the run directory ``outs[i]`` of ``seeds[i]``
     (module doc). Arguments and errors as :func:`.run.train_jax`'s (``JaxRunError`` before any directory is touched;
     files of a previous run in an ``out`` are replaced, other files kept: the caller decides whether it may be
-    written). Returns one :class:`agents.training.train.TrainResult` per seed (``seconds``: the run's share of the
-    vmapped run's time)."""
+    written). Returns one :class:`agents.training.train.TrainResult` per seed (``seconds``: the compiled run's time,
+    vmapped: its share; ``config["vmapped"]`` says whether the seeds shared one run)."""
     seeds = _check_seeds(seeds, outs)
+    if algo not in ALGOS:
+        raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
     builder = BUILDERS.get((algo, bool(multi_agent)))
-    if algo not in ALGOS or builder is None:
-        have = sorted(f"{a}{' (multi-agent)' if m else ''}" for a, m in BUILDERS if a in ALGOS)
-        raise JaxRunError(f"--algo {algo}{' --multi-agent' if multi_agent else ''}: the vmapped seeds of the jitted "
-                          f"trainer implement {', '.join(have)}")
+    if builder is None or len(seeds) == 1:
+        from .run import train_jax
+        from .run_marl import train_jax_marl
+
+        one = train_jax_marl if multi_agent else train_jax
+        return [one(env, algo, timesteps=timesteps, seed=s, out=out, hyperparams=hyperparams, threads=threads,
+                    progress=progress, curve_points=curve_points, curve_seeds=curve_seeds)
+                for s, out in zip(seeds, outs)]
     curve_seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None
                                     else curve_seeds)]
     if not curve_seeds or not all(s in TUNING for s in curve_seeds):
@@ -172,7 +182,7 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     from dobs_envs.registry import ENVIRONMENTS
 
     n = len(seeds)
-    tag = f"[jax {algo}{' shared' if multi_agent else ''} {env}, {n} seed{'s' if n > 1 else ''}]"
+    tag = f"[jax {algo}{' shared' if multi_agent else ''} {env}, {n} seeds vmapped]"
 
     def say(msg: str) -> None:
         if progress:
@@ -181,26 +191,21 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as .run.train_jax)
     run = builder(env, gid, hyperparams, timesteps, curve_points, curve_seeds)
-    if n == 1:
-        train, keys = jax.jit(run.train), jax.random.PRNGKey(seeds[0])
-    else:
-        train = jax.jit(jax.vmap(run.train, in_axes=(0, None)))
-        keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
+    train = jax.jit(jax.vmap(run.train, in_axes=(0, None)))
+    keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
     setup = time.perf_counter() - t_wall
     base = {"env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
             "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
             **run.config, "timesteps_done": 0, "policy": "policy.npz", "curve_seeds": curve_seeds, "status": RUNNING}
     configs = []
     for s, out in zip(seeds, outs):
-        c = {**base, "seed": s, "key": f"jax.random.PRNGKey({s})"}
-        if n > 1:
-            c["vmapped"] = {"seeds": seeds, "runs": n}
+        c = {**base, "seed": s, "key": f"jax.random.PRNGKey({s})", "vmapped": {"seeds": seeds, "runs": n}}
         os.makedirs(out, exist_ok=True)
         clear_run(out)
         write_json_atomic(os.path.join(out, "config.json"), c)
         configs.append(c)
 
-    say(f"compiling {run.describe}{f', vmapped over {n} seeds' if n > 1 else ''} ...")
+    say(f"compiling {run.describe}, vmapped over the seeds {seeds} ...")
     w0, c0 = time.perf_counter(), time.process_time()
     compiled = train.lower(keys, run.hp).compile()
     compile_s, compile_cpu = time.perf_counter() - w0, time.process_time() - c0
@@ -214,7 +219,7 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     share = {k: v / n for k, v in whole.items()}
     out_results = []
     for i, (s, out, config) in enumerate(zip(seeds, outs, configs)):
-        result = results if n == 1 else jax.tree.map(lambda x, i=i: x[i], results)
+        result = jax.tree.map(lambda x, i=i: x[i], results)
         w0, c0 = time.perf_counter(), time.process_time()
         run.export(out, result, {"seed": s, "timesteps": run.config["timesteps"], "timesteps_done": run.steps_done})
         w1 = time.perf_counter()
@@ -226,8 +231,7 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
                       + time.perf_counter() - w0,
                       total_cpu_seconds=share["compile_cpu_seconds"] + share["train_cpu_seconds"]
                       + time.process_time() - c0)
-        if n > 1:
-            config["vmapped"].update(whole)
+        config["vmapped"].update(whole)
         write_json_atomic(os.path.join(out, "config.json"), config)
         out_results.append(TrainResult(path=out, model=None, seconds=share["train_seconds"], config=config))
     return out_results
