@@ -74,6 +74,7 @@ def test_jitted_rows_count_each_seed_as_a_run(first):
     from agents.benchmark.stats import interval_estimate, run_scores
 
     out, summ, doc = first
+    assert summ["trainer"] == "jax"
     rows = {r["policy"]: r for r in doc["results"]}
     assert set(rows) == {AGENTS[k].label for k in JAX_AGENTS} | set(ANALYTIC)
     assert {"PPO (JAX)", "PPO (JAX, shared)"} <= set(rows)
@@ -175,6 +176,19 @@ def test_other_episodes_evaluate_the_kept_policies_again(second, tmp_path):
         assert (after[key] == t) == (key[2] == "policy.npz"), key  # the policy kept, the result new
     doc = _results(out)
     assert all(e["seed"] >= 10_100 for eps in doc["episodes_detail"]["PPO (JAX)"].values() for e in eps)
+
+
+def test_dry_run_names_the_vmapped_tasks(tmp_path, capsys):
+    out = str(tmp_path / "b")
+    assert main(["benchmark", "--budget", "tiny", "--trainer", "all", "--out", out, "--dry-run"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    n = len(default_agents("tiny", "all")) * TINY["seeds"]
+    assert lines[0].startswith(f"{n} of {n} runs would train")
+    for k in JAX_AGENTS:
+        for s in range(TINY["seeds"]):
+            assert (f"  train tracking {k} seed {s}: {TINY['agents'][k]} steps -> {out}/models/tracking/tiny/{k}/s{s} "
+                    f"(jitted: {TINY['seeds']} seeds in one vmapped task)") in lines
+    assert not os.path.exists(out)
 
 
 @pytest.mark.parametrize("argv, match", [

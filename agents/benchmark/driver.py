@@ -176,6 +176,6 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     per_env_rows, docs = {}, {}
     for e in P.envs:
         per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e], fault_free.get(e))
-    return write_summary(out, P, per_env_rows, docs, backend=backend, address=address,
+    return write_summary(out, P, per_env_rows, docs, trainer=trainer, backend=backend, address=address,
                          workers=getattr(be, "workers", None), executed_on=placed,
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

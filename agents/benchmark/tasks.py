@@ -101,32 +101,45 @@ def train_seeds_and_evaluate(specs: list[dict], scratch: str | None = None) -> l
     directory, and evaluate each: one record per run, as :func:`train_and_evaluate`'s. A vmapped run's
     ``train_seconds`` is its share, the whole task's training wall time (setup, compilation, the vmapped run, the
     learning curves) divided by the number of seeds, and ``train_seconds_shared`` records ``{"seconds": that time,
-    "runs": seeds}``; a run trained alone (one seed) records its own ``total_seconds``."""
-    from ..training.jax.vmap_seeds import train_jax_seeds
-
+    "runs": seeds}``; a run trained alone (one seed) records its own ``total_seconds``. ``jax_enable_x64`` (an env
+    with communication faults switches it on) is restored afterwards: the worker's next job runs as before."""
     first = specs[0]
     differ = [k for k in ("env", "agent", "steps", "hp", "env_kwargs", "curve_seeds", "curve_points", "threads")
             if any(sp[k] != first[k] for sp in specs)]
     if differ:
         raise ValueError(f"vmapped seeds must share their run's configuration; {differ} differ")
     a = agent_spec(first["agent"])
+    import jax
+
+    x64 = jax.config.jax_enable_x64
     with tempfile.TemporaryDirectory(prefix="runs-", dir=scratch) as root:
-        paths = [os.path.join(root, f"s{sp['seed']}") for sp in specs]
-        t0 = time.perf_counter()
-        runs = train_jax_seeds(first["env"], a.algo, multi_agent=a.multi_agent, seeds=[sp["seed"] for sp in specs],
-                               outs=paths, timesteps=first["steps"], hyperparams=_training_overrides(first) or None,
-                               threads=first["threads"], progress=False, curve_points=first["curve_points"],
-                               curve_seeds=first["curve_seeds"])
-        seconds = time.perf_counter() - t0
-        records = []
-        for sp, path, run in zip(specs, paths, runs):
-            with open(os.path.join(path, "curve.json")) as fh:
-                curve = json.load(fh)["points"]
-            shared = "vmapped" in run.config  # else trained alone (one seed, or no vmapped builder): its own time
-            result = _evaluate(sp, path, seconds / len(specs) if shared else run.config["total_seconds"], curve)
-            if shared:
-                result["train_seconds_shared"] = {"seconds": seconds, "runs": len(specs)}
-            records.append({"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False})
+        try:
+            return _train_seeds(specs, a, root)
+        finally:
+            jax.config.update("jax_enable_x64", x64)
+
+
+def _train_seeds(specs: list[dict], a, root: str) -> list[dict]:
+    """:func:`train_seeds_and_evaluate`'s work in the scratch directory ``root``."""
+    from ..training.jax.vmap_seeds import train_jax_seeds
+
+    first = specs[0]
+    paths = [os.path.join(root, f"s{sp['seed']}") for sp in specs]
+    t0 = time.perf_counter()
+    runs = train_jax_seeds(first["env"], a.algo, multi_agent=a.multi_agent, seeds=[sp["seed"] for sp in specs],
+                           outs=paths, timesteps=first["steps"], hyperparams=_training_overrides(first) or None,
+                           threads=first["threads"], progress=False, curve_points=first["curve_points"],
+                           curve_seeds=first["curve_seeds"])
+    seconds = time.perf_counter() - t0
+    records = []
+    for sp, path, run in zip(specs, paths, runs):
+        with open(os.path.join(path, "curve.json")) as fh:
+            curve = json.load(fh)["points"]
+        shared = "vmapped" in run.config  # else trained alone (one seed, or no vmapped builder): its own time
+        result = _evaluate(sp, path, seconds / len(specs) if shared else run.config["total_seconds"], curve)
+        if shared:
+            result["train_seconds_shared"] = {"seconds": seconds, "runs": len(specs)}
+        records.append({"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False})
     return records
 
 

@@ -408,7 +408,7 @@ def benchmark_command(args) -> int:
 
 def _benchmark_dry_run(args, plan) -> int:
     """``benchmark --dry-run``: which runs would train, which stored results are reused (nothing written)."""
-    from ..benchmark.plan import pending_runs, reevaluated_runs, replaced_runs
+    from ..benchmark.plan import agent_spec, pending_runs, reevaluated_runs, replaced_runs
 
     todo, again = pending_runs(plan), reevaluated_runs(plan)
     clash = {sp["path"] for sp in replaced_runs(todo)}
@@ -418,6 +418,9 @@ def _benchmark_dry_run(args, plan) -> int:
     key = lambda sp: (sp["env"], sp["agent"], sp["seed"])  # noqa: E731
     for sp in sorted(todo, key=key):
         note = " (replaces a finished run of another configuration: needs --overwrite)" if sp["path"] in clash else ""
+        if agent_spec(sp["agent"]).trainer == "jax":
+            n = sum(o["env"] == sp["env"] and o["agent"] == sp["agent"] for o in todo)
+            note += f" (jitted: {n} seeds in one vmapped task)" if n > 1 else " (jitted)"
         print(f"  train {sp['env']} {sp['agent']} seed {sp['seed']}: {sp['steps']} steps -> {sp['path']}{note}")
     for sp in sorted(again, key=key):
         print(f"  evaluate again {sp['env']} {sp['agent']} seed {sp['seed']} -> {sp['path']}")
