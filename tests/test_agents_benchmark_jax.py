@@ -204,3 +204,17 @@ def test_trainer_usage_errors(argv, match, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert exc.value.code == 2 and match in err and "Traceback" not in err and err.count("\n") <= 1, err
     assert not os.path.exists(out)
+
+
+def test_jitted_agents_without_the_jax_extra_are_a_usage_error(tmp_path, capsys, monkeypatch):
+    """Without optax (the jax extra), --trainer jax stops before anything is written (a dry run still lists)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "optax", None)  # importlib.util.find_spec then answers None: not installed
+    out = str(tmp_path / "b")
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--budget", "tiny", "--trainer", "jax", "--out", out])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and "pip install 'dobs-envs[jax]'" in err and "optax is missing" in err, err
+    assert not os.path.exists(out)
+    assert main(["benchmark", "--budget", "tiny", "--trainer", "sb3", "--out", out, "--dry-run"]) == 0

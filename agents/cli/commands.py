@@ -367,6 +367,11 @@ def benchmark_command(args) -> int:
         _usage_error(f"--recipe: {exc}")
     except ValueError as exc:
         _usage_error(str(exc))
+    jitted = [k for k in plan.steps if agent_spec(k).trainer == "jax"]
+    missing = [m for m in ("jax", "optax") if importlib.util.find_spec(m) is None]
+    if jitted and missing and not args.dry_run:
+        _usage_error(f"the jitted agents ({', '.join(jitted)}) need the jax extra ({missing[0]} is missing): "
+                     f"pip install 'dobs-envs[jax]'")
     if args.dry_run:
         return _benchmark_dry_run(args, plan)
     try:
