@@ -10,7 +10,9 @@
    parameter-shared PPO; ``full`` adds SAC, TD3 and PPO trained on the sqrt cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
    behaviour cloning), each with the recipe of ``agents/config/hyperparams/<algo>.yaml``; ``--recipe
    AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
-   tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
+   tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's. ``--trainer jax``
+   (``all``) gives the default set the jitted agents instead of (besides) the SB3 ones: "PPO (JAX)" and
+   "PPO (JAX, shared)", each env's seeds of one of them one compiled run vmapped over the seeds, each seed a run.
    Each run records its learning curve (:mod:`agents.training.curves`). A finished run is
    reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
    so an interrupted benchmark resumes where it stopped.

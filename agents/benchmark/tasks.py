@@ -102,7 +102,11 @@ def train_seeds_and_evaluate(specs: list[dict], scratch: str | None = None) -> l
     ``train_seconds`` is its share, the whole task's training wall time (setup, compilation, the vmapped run, the
     learning curves) divided by the number of seeds, and ``train_seconds_shared`` records ``{"seconds": that time,
     "runs": seeds}``; a run trained alone (one seed) records its own ``total_seconds``. ``jax_enable_x64`` (an env
-    with communication faults switches it on) is restored afterwards: the worker's next job runs as before."""
+    with communication faults switches it on) is restored afterwards: the worker's next job runs as before.
+
+    The budget's env options train the jitted run too (:func:`agents.benchmark.plan.jax_env_options`); its learning
+    curve is scored on the env's own episodes (:mod:`agents.training.jax.run`'s), which differ from the budget's
+    only in ``tiny`` (20-step episodes there, 400 for the curve)."""
     first = specs[0]
     differ = [k for k in ("env", "agent", "steps", "hp", "env_kwargs", "curve_seeds", "curve_points", "threads")
             if any(sp[k] != first[k] for sp in specs)]
