@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from agents.benchmark.driver import run_benchmark
-from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS
+from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS, default_agents
 from dobs_envs.cli import main
 
 TINY = BUDGETS["tiny"]
+#: the agents the tiny budget trains by default (--trainer sb3; the jitted ones: tests/test_agents_benchmark_jax.py)
+TINY_AGENTS = {k: TINY["agents"][k] for k in default_agents("tiny")}
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +30,7 @@ def test_files_and_every_policy(tiny_run):
     for f in ("summary.json", "summary.png", "tracking/results.csv", "tracking/results.json", "tracking/results.md",
               "tracking/error_norms.png", "tracking/learning_curves.png"):
         assert os.path.getsize(os.path.join(out, f)) > 0, f
-    expected = {AGENTS[k].label for k in TINY["agents"]} | set(ANALYTIC)
+    expected = {AGENTS[k].label for k in TINY_AGENTS} | set(ANALYTIC)
     assert {r["policy"] for r in doc["results"]} == expected
     with open(os.path.join(out, "tracking", "results.csv")) as fh:
         rows = list(csv.DictReader(fh))
@@ -46,7 +48,7 @@ def test_files_and_every_policy(tiny_run):
 def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
     _, _, doc = tiny_run
     res = {r["policy"]: r for r in doc["results"]}
-    for k in TINY["agents"]:
+    for k in TINY_AGENTS:
         assert res[AGENTS[k].label]["runs"] == TINY["seeds"]
         assert res[AGENTS[k].label]["kind"] == ("hybrid" if AGENTS[k].hybrid else "RL")
     p = res["paper (separation)"]
@@ -116,7 +118,7 @@ def test_same_seeds_and_initial_states_for_every_policy_and_run(tiny_run):
 
 def test_learning_curves_cover_training(tiny_run):
     out, _, doc = tiny_run
-    for k, steps in TINY["agents"].items():
+    for k, steps in TINY_AGENTS.items():
         c = doc["learning_curves"][AGENTS[k].label]
         assert c is not None and c["env_steps"][0] <= steps // TINY["curve_points"] and c["env_steps"][-1] >= steps
         assert all(lo <= m <= hi for lo, m, hi in zip(c["ci_low"], c["iqm"], c["ci_high"]))
@@ -241,7 +243,7 @@ def test_cli_usage_errors_exit_2(argv, tmp_path, capsys):
 def test_cli_dry_run_lists_the_runs_that_would_train(tiny_run, tmp_path, capsys):
     """``--dry-run`` tells which runs train and which stored results are reused; it writes nothing."""
     out, _, _ = tiny_run
-    n = len(TINY["agents"]) * TINY["seeds"]
+    n = len(TINY_AGENTS) * TINY["seeds"]
     assert main(["benchmark", "--budget", "tiny", "--out", out, "--dry-run"]) == 0
     assert capsys.readouterr().out.splitlines() == [
         f"0 of {n} runs would train; 0 kept models are evaluated again on other episodes; {n} stored results in "
@@ -266,7 +268,7 @@ def test_an_agent_with_its_own_number_of_training_runs(tiny_run, tmp_path, capsy
     out, _, full = tiny_run
     mine = str(tmp_path / "out")
     shutil.copytree(os.path.join(out, "models"), os.path.join(mine, "models"))
-    n = len(TINY["agents"]) * TINY["seeds"]
+    n = len(TINY_AGENTS) * TINY["seeds"]
     # more runs than stored: only the new seed trains
     assert main(["benchmark", "--budget", "tiny", "--out", mine, "--dry-run", "--agent-seeds", "ppo=3"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -10,7 +10,9 @@
    parameter-shared PPO; ``full`` adds SAC, TD3 and PPO trained on the sqrt cost) and the hybrids (residual PPO, centralised and shared; PPO warm-started by
    behaviour cloning), each with the recipe of ``agents/config/hyperparams/<algo>.yaml``; ``--recipe
    AGENT=FILE`` adds ``AGENT@recipe``, AGENT trained with a recipe file's section (e.g. ``dobs-envs
-   tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's.
+   tune``'s ``best.yml``) in run directories of its own, a row of its own next to AGENT's. ``--trainer jax``
+   (``all``) gives the default set the jitted agents instead of (besides) the SB3 ones: "PPO (JAX)" and
+   "PPO (JAX, shared)", each env's seeds of one of them one compiled run vmapped over the seeds, each seed a run.
    Each run records its learning curve (:mod:`agents.training.curves`). A finished run is
    reused when its configuration is identical (``<out>/models/<env>/<budget>/<agent>/s<seed>``),
    so an interrupted benchmark resumes where it stopped.
@@ -52,26 +54,31 @@ import time
 
 from ..config.envs import FAULT_FREE
 from .backends import Job, make_backend
-from .plan import (REEVALUATE, REUSE, BenchmarkPlan, RunConflictError, pending_runs, plan_runs, replaced_runs,
-                   stored_answer)
+from .plan import (REEVALUATE, REUSE, BenchmarkPlan, RunConflictError, agent_spec, pending_runs, plan_runs,
+                   replaced_runs, stored_answer)
 from .report import write_env_report, write_summary
 from .store import claim_out_dir, read_run_files, write_record
-from .tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate
+from .tasks import analytic_results, compile_kernels, fault_free_paper, reevaluate, train_and_evaluate, \
+    train_seeds_and_evaluate
 
-__all__ = ["run_benchmark", "FAULT_FREE_PAPER"]
+__all__ = ["run_benchmark", "FAULT_FREE_PAPER", "TRAIN_SEEDS"]
 
 #: the job key of the paper's controller on an env's fault-free counterpart
 #: (:func:`agents.benchmark.tasks.fault_free_paper`)
 FAULT_FREE_PAPER = "fault_free_paper"
+#: the job key of a jitted agent's seeds of one env trained as one vmapped run
+#: (:func:`agents.benchmark.tasks.train_seeds_and_evaluate`: a list of run records)
+TRAIN_SEEDS = "train_seeds"
 
 
 def _jobs(plan: BenchmarkPlan, scratch: str | None, eval_seed: int) -> tuple[list[Job], dict]:
     """The work of ``plan`` not answered by a stored run: a training job per run to train, an evaluation
-    job per kept model to evaluate again (its files read here and sent along), the analytic
+    job per kept model to evaluate again (its files read here and sent along; a jitted agent's runs to train on an
+    env: one job, its seeds vmapped, :data:`TRAIN_SEEDS`), the analytic
     controllers' evaluation per env and, for an env with faults, the paper's controller on its fault-free
     counterpart (last: short jobs fill the gaps); and the stored results reused,
     ``{(env, agent, seed): result}``."""
-    train, again, reused = [], [], {}
+    train, again, reused, vmapped = [], [], {}, {}
     for sp in plan.specs:
         key = (sp["env"], sp["agent"], sp["seed"])
         answer, prev = stored_answer(sp)
@@ -80,8 +87,12 @@ def _jobs(plan: BenchmarkPlan, scratch: str | None, eval_seed: int) -> tuple[lis
         elif answer == REEVALUATE:
             again.append(Job(("reevaluate", *key), reevaluate, (sp, read_run_files(sp["path"]), prev, scratch),
                              cpus=sp["threads"] or 1))
+        elif agent_spec(sp["agent"]).trainer == "jax":
+            vmapped.setdefault(key[:2], []).append(sp)
         else:
             train.append(Job(("train", *key), train_and_evaluate, (sp, scratch), cpus=sp["threads"] or 1))
+    train = [Job((TRAIN_SEEDS, *key), train_seeds_and_evaluate, (specs, scratch), cpus=specs[0]["threads"] or 1)
+             for key, specs in vmapped.items()] + train
     episodes = len(plan.eval_seeds)
     analytic = [Job(("analytic", e), analytic_results, (e, plan.env_kwargs, eval_seed, episodes)) for e in plan.envs]
     # an env with faults: the paper's controller on its fault-free counterpart, the degradation columns' reference
@@ -95,7 +106,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                   agents: list[str] | None = None, seeds: int | None = None, workers: int | None = None,
                   progress: bool = True, threads: int | None = 1, overwrite: bool = False,
                   backend: str = "process", address: str | None = None, recipes: dict | None = None,
-                  agent_seeds: dict | None = None) -> dict:
+                  agent_seeds: dict | None = None, trainer: str = "sb3") -> dict:
     """Run the benchmark (see module doc) on ``env`` (a name or ``"all"``); returns the summary document.
 
     Training seeds are ``seed, seed + 1, ...`` (``seeds`` of them, default the budget's; ``agent_seeds``
@@ -109,6 +120,8 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     :func:`plan_runs` and :func:`pending_runs` tell beforehand what it would train.
     ``recipes``: ``{agent: recipe file}``: adds the agents ``<agent>@recipe`` trained with the file's
     section (:func:`plan_runs`); the files' paths and SHA-256 are recorded in the results and summary.
+    ``trainer``: the learned agents of the default set (:data:`agents.benchmark.plan.TRAINERS`: ``"sb3"``,
+    ``"jax"``: the jitted agents, each env's seeds of one agent vmapped in one task, ``"all"``).
 
     Raises
     ------
@@ -119,7 +132,8 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     """
     t_start = time.perf_counter()
     P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
-                  agents=agents, seeds=seeds, threads=threads, recipes=recipes, agent_seeds=agent_seeds)
+                  agents=agents, seeds=seeds, threads=threads, recipes=recipes, agent_seeds=agent_seeds,
+                  trainer=trainer)
     be = make_backend(backend, workers=workers, address=address)  # checks the arguments before any write
     claim_out_dir(out, overwrite=overwrite)  # refuses a directory holding files the benchmark did not write
     clash = replaced_runs(pending_runs(P))
@@ -149,12 +163,13 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
                 if job.key[0] == FAULT_FREE_PAPER:
                     fault_free[job.key[1]] = res
                     continue
-                key = job.key[1:]
-                write_record(specs[key]["path"], res)  # the driver writes; a finished run is kept from here on
-                results[key] = {**res["result"], "reevaluated": True} if res["reevaluated"] else res["result"]
-                placed["/".join(map(str, key))] = res["result"].get("executed_on")
-                if bar is not None:
-                    bar.update(1)
+                for rec in res if job.key[0] == TRAIN_SEEDS else [res]:  # vmapped seeds: one record per run
+                    key = (*job.key[1:3], rec["result"]["seed"])
+                    write_record(specs[key]["path"], rec)  # the driver writes; a finished run is kept from here on
+                    results[key] = {**rec["result"], "reevaluated": True} if rec["reevaluated"] else rec["result"]
+                    placed["/".join(map(str, key))] = rec["result"].get("executed_on")
+                    if bar is not None:
+                        bar.update(1)
         finally:
             if bar is not None:
                 bar.close()
@@ -163,6 +178,6 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     per_env_rows, docs = {}, {}
     for e in P.envs:
         per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e], fault_free.get(e))
-    return write_summary(out, P, per_env_rows, docs, backend=backend, address=address,
+    return write_summary(out, P, per_env_rows, docs, trainer=trainer, backend=backend, address=address,
                          workers=getattr(be, "workers", None), executed_on=placed,
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

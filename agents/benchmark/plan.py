@@ -16,20 +16,27 @@ from ..config.envs import ENVS, TASKS
 from ..training.algos import LEGACY_LIBRARY, backend
 from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
-__all__ = ["AGENTS", "BUDGETS", "AgentSpec", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
+__all__ = ["AGENTS", "BUDGETS", "TRAINERS", "AgentSpec", "default_agents", "BenchmarkPlan", "RunConflictError", "plan_runs", "pending_runs",
            "reevaluated_runs", "replaced_runs", "stored_answer", "ANALYTIC", "ANALYTIC_INFO", "PAPER", "CURVE_SEED",
            "TRAINING_KEYS", "RECIPE_SUFFIX", "agent_spec", "is_agent_name", "recipe_provenance"]
 
 
 @dataclass(frozen=True)
 class AgentSpec:
-    """A benchmark agent: algorithm, parameter sharing, hybrid kind, label, extra training env options."""
+    """A benchmark agent: algorithm, parameter sharing, hybrid kind, label, extra training env options, trainer.
+
+    ``trainer``: ``"sb3"`` (:func:`agents.training.train.train`, one task per run) or ``"jax"`` (the jitted trainer,
+    :mod:`agents.training.jax`: an env's seeds of the agent vmapped in one task,
+    :func:`agents.training.jax.vmap_seeds.train_jax_seeds`); ``counterpart``: a jitted agent's SB3 agent, whose env
+    steps it trains in every budget (equal budgets: :data:`BUDGETS` is filled from it)."""
 
     algo: str
     multi_agent: bool
     hybrid: str | None
     label: str
     train_env_kwargs: tuple = ()
+    trainer: str = "sb3"
+    counterpart: str | None = None
 
     @property
     def kind(self) -> str:
@@ -39,6 +46,21 @@ class AgentSpec:
     def information(self) -> str:
         """What the agent observes (the table's information column)."""
         return INFO_OWN_NODE if self.multi_agent else INFO_POOLED
+
+    @property
+    def hp_key(self) -> str:
+        """The key of a budget's ``hyperparams`` overrides the agent trains with: its algorithm (SB3), or
+        ``<algo>_jax`` (the jitted trainer reads other keys)."""
+        return self.algo if self.trainer == "sb3" else f"{self.algo}_{self.trainer}"
+
+    @property
+    def library(self) -> str:
+        """What a stored run must have been trained by (``config.json`` ``library``) to be reused."""
+        if self.trainer == "jax":
+            from ..training.jax import LIBRARY
+
+            return LIBRARY
+        return backend(self.algo).library
 
 
 AGENTS = {
@@ -53,7 +75,12 @@ AGENTS = {
     "ppo_res": AgentSpec("ppo", False, "residual", "residual PPO (centralised) [hybrid]"),
     "ppo_res_ma": AgentSpec("ppo", True, "residual", "residual PPO (shared) [hybrid]"),
     "ppo_bc": AgentSpec("ppo", False, "bc", "BC-warm-started PPO (centralised) [hybrid]"),
+    # the jitted trainer (agents.training.jax; its algorithms: agents.training.jax.ALGOS)
+    "ppo_jax": AgentSpec("ppo", False, None, "PPO (JAX)", trainer="jax", counterpart="ppo"),
+    "ppo_ma_jax": AgentSpec("ppo", True, None, "PPO (JAX, shared)", trainer="jax", counterpart="ppo_ma"),
 }
+#: ``benchmark --trainer``: the learned rows of the default agent set (the analytic rows are always there)
+TRAINERS = {"sb3": ("sb3",), "jax": ("jax",), "all": ("sb3", "jax")}
 
 BUDGETS = {
     "tiny": {
@@ -64,6 +91,8 @@ BUDGETS = {
             "sac": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
             "td3": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
             "crossq": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
+            # the jitted agents' overrides: "<algo>_jax" (AgentSpec.hp_key)
+            "ppo_jax": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1},
         },
     },
     "quick": {
@@ -82,6 +111,21 @@ BUDGETS = {
     },
 }
 
+# equal budgets: a jitted agent trains its SB3 counterpart's env steps wherever the budget trains that agent
+for _b in BUDGETS.values():
+    _b["agents"].update({k: _b["agents"][a.counterpart] for k, a in AGENTS.items()
+                         if a.counterpart in _b["agents"]})
+del _b
+
+
+def default_agents(budget: str, trainer: str = "sb3") -> list[str]:
+    """The agents ``budget`` trains by default with ``benchmark --trainer trainer`` (:data:`TRAINERS`): its agents
+    trained by the selected trainers, in table order."""
+    if trainer not in TRAINERS:
+        raise ValueError(f"unknown trainer {trainer!r}; choose from {list(TRAINERS)}")
+    return [k for k in BUDGETS[budget]["agents"] if AGENTS[k].trainer in TRAINERS[trainer]]
+
+
 #: ``--recipe AGENT=FILE`` (:func:`plan_runs` ``recipes``) adds the agent ``AGENT + RECIPE_SUFFIX``: AGENT's
 #: runs trained with the recipe file's section, in their own run directories, as a row of their own
 RECIPE_SUFFIX = "@recipe"
@@ -98,7 +142,8 @@ def agent_spec(name: str) -> AgentSpec:
     ``<agent>@recipe`` is its base agent with its own label."""
     if name.endswith(RECIPE_SUFFIX) and name[:-len(RECIPE_SUFFIX)] in AGENTS:
         a = AGENTS[name[:-len(RECIPE_SUFFIX)]]
-        return AgentSpec(a.algo, a.multi_agent, a.hybrid, f"{a.label}, --recipe file", a.train_env_kwargs)
+        return AgentSpec(a.algo, a.multi_agent, a.hybrid, f"{a.label}, --recipe file", a.train_env_kwargs, a.trainer,
+                         a.counterpart)
     return AGENTS[name]
 
 
@@ -173,9 +218,22 @@ def _training_overrides(spec: dict) -> dict:
 
     a = agent_spec(spec["agent"])
     hp = merge_overrides(spec.get("recipe"), spec["hp"])
-    if a.train_env_kwargs:
-        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **dict(a.train_env_kwargs)}
+    extra = dict(a.train_env_kwargs)
+    if a.trainer == "jax":  # the jitted trainer takes the benchmark's env options as the recipe's training options
+        extra.update(jax_env_options(spec["env_kwargs"]))
+    if extra:
+        hp["env_kwargs"] = {**hp.get("env_kwargs", {}), **extra}
     return hp
+
+
+def jax_env_options(env_kwargs: dict) -> dict:
+    """The benchmark's env options (those of the PettingZoo envs) as options of :func:`dobs_envs.jax.make`: the
+    episode length ``max_cycles`` as ``max_episode_steps`` (as :func:`agents.config.envs.gym_factory` gives it to the
+    Gymnasium envs), the others as they are."""
+    kw = dict(env_kwargs)
+    if "max_cycles" in kw:
+        kw["max_episode_steps"] = int(kw.pop("max_cycles"))
+    return kw
 
 
 def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
@@ -187,19 +245,24 @@ def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
                             overrides=_training_overrides(spec) or None)
     return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only,
-                         library=backend(a.algo).library)
+                         library=a.library)
 
 
 def _stored_model(spec: dict) -> dict | None:
     """The stored result of a run trained exactly as ``spec`` asks but evaluated on other episodes,
-    if its model is kept (``model.zip``, and ``vecnormalize.pkl`` when it normalises): the benchmark
-    evaluates that model again instead of training it again. None otherwise."""
+    if its model is kept (``model.zip``, and ``vecnormalize.pkl`` when it normalises; a jitted run: its exported
+    policy, ``policy.npz`` + ``policy.json``): the benchmark evaluates that model again instead of training it
+    again. None otherwise."""
     import zipfile
 
     prev = _stored_result(spec, training_only=True)
     if prev is None or prev["signature"] == _run_signature(spec):
         return None
     path = spec["path"]
+    if agent_spec(spec["agent"]).trainer == "jax":
+        from ..training.jax import POLICY_FILES
+
+        return prev if all(os.path.isfile(os.path.join(path, f)) for f in POLICY_FILES) else None
     try:
         with open(os.path.join(path, "config.json")) as fh:
             normalize = bool(json.load(fh).get("normalize"))
@@ -232,10 +295,11 @@ def stored_answer(spec: dict) -> tuple[str, dict | None]:
 
 # ---------------------------------------------------------------------- the runs of an invocation
 def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: int | None,
-          recipes: dict | None = None, agent_seeds: dict | None = None) -> tuple[dict, int, dict]:
+          recipes: dict | None = None, agent_seeds: dict | None = None,
+          trainer: str = "sb3") -> tuple[dict, int, dict]:
     B = BUDGETS[budget]
     default = max(B["agents"].values())
-    plan = dict(B["agents"])
+    plan = {k: B["agents"][k] for k in default_agents(budget, trainer)}
     variants = [k + RECIPE_SUFFIX for k in recipes or {}]
     if agents is not None:
         unknown = sorted(set(agents) - set(AGENTS) - set(variants))
@@ -295,7 +359,7 @@ class BenchmarkPlan:
 def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/benchmark", *, seed: int = 0,
               eval_seed: int = 10_000, episodes: int | None = None, timesteps: int | None = None,
               agents: list[str] | None = None, seeds: int | None = None, threads: int | None = 1,
-              recipes: dict | None = None, agent_seeds: dict | None = None) -> BenchmarkPlan:
+              recipes: dict | None = None, agent_seeds: dict | None = None, trainer: str = "sb3") -> BenchmarkPlan:
     """The runs :func:`run_benchmark` would train with these arguments (it validates them; nothing is
     written). With :func:`pending_runs` it tells which of them a stored result already answers.
 
@@ -316,7 +380,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
     ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
     :class:`agents.config.hyperparam_files.HyperparamsError` (a ``ValueError``) when a file is missing, invalid or has
-    no section for an env."""
+    no section for an env. Recipe files are for the SB3 agents (a jitted agent's: ``ValueError``).
+
+    ``trainer`` (:data:`TRAINERS`): which learned agents the default set has (``agents`` not given): ``"sb3"`` the
+    SB3 agents of the budget, ``"jax"`` the jitted ones (:class:`AgentSpec` ``trainer``), ``"all"`` both; ``agents``
+    names any. A jitted agent's seeds of one env train as one task (vmapped, :mod:`agents.benchmark.tasks`); each
+    seed is a run of its own, as an SB3 agent's."""
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; choose from {sorted(BUDGETS)}")
     env_names = list(TASKS) if env == "all" else [env]  # "all": the fault-free tasks (agents.config.envs.TASKS)
@@ -328,7 +397,12 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     bad = sorted(set(recipes) - set(AGENTS))
     if bad:
         raise ValueError(f"recipe files for unknown agents {bad}; choose from {sorted(AGENTS)}")
-    plan, n_seeds, counts = _plan(budget, agents, timesteps, seeds, recipes, agent_seeds)
+    jitted = sorted(k for k in recipes if AGENTS[k].trainer != "sb3")
+    if jitted:
+        raise ValueError(f"recipe files are for the SB3 agents; {jitted} train with the jitted trainer (give their "
+                         f"recipe's keys in agents/config/hyperparams instead)")
+    plan, n_seeds, counts = _plan(budget, agents, timesteps, seeds, recipes, agent_seeds, trainer)
+    _check_jitted(plan)
     episodes = int(episodes or B["episodes"])
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
@@ -348,7 +422,7 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     for e in env_names:
         for key, steps in plan.items():
             a = agent_spec(key)
-            hp = dict(B["hyperparams"].get(a.algo, {}))
+            hp = dict(B["hyperparams"].get(a.hp_key, {}))
             extra = {}
             if key in provenance:  # not in the signature: the stored run's hyperparameters tell the recipe
                 extra = {"recipe": sections[(provenance[key]["agent"], e)],
@@ -356,13 +430,25 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
             for s in range(seed, seed + counts.get(key, n_seeds)):
                 specs.append({"env": e, "agent": key, "seed": s, "steps": int(steps), "hp": hp,
                               "env_kwargs": env_kwargs, "eval_seeds": eval_seeds, "curve_seeds": curve_seeds,
-                              "curve_every": max(1, int(steps) // B["curve_points"]), "threads": threads,
+                              "curve_every": max(1, int(steps) // B["curve_points"]),
+                              "curve_points": B["curve_points"], "threads": threads,
                               "path": os.path.join(out, "models", e, budget, key, f"s{s}"), **extra})
     # longest jobs first: better packing on the workers
     specs.sort(key=lambda sp: -sp["steps"] * (5 if agent_spec(sp["agent"]).multi_agent else 1))
     return BenchmarkPlan(env_names, budget, plan, list(range(seed, seed + n_seeds)), eval_seeds, curve_seeds,
                          env_kwargs, specs, provenance,
                          {k: list(range(seed, seed + n)) for k, n in counts.items()})
+
+
+def _check_jitted(plan: dict) -> None:
+    """``ValueError`` naming a planned jitted agent whose algorithm the jitted trainer does not implement
+    (:data:`agents.training.jax.ALGOS`; read without importing JAX)."""
+    from ..training.jax import ALGOS
+
+    for key in plan:
+        a = agent_spec(key)
+        if a.trainer == "jax" and a.algo not in ALGOS:
+            raise ValueError(f"agent {key!r}: the jitted trainer implements {list(ALGOS)}, not {a.algo!r}")
 
 
 def _check_constructor_keys(agent: str, env: str, path: str, overrides: dict) -> None:

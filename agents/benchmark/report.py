@@ -441,7 +441,10 @@ def write_env_report(out: str, env: str, plan: BenchmarkPlan, results: dict, ana
         "failure_rate": "fraction of episodes terminated early (state bound exceeded / non-finite)",
         "poi": "probability of improvement P(J_policy < J_paper) over matched (run, episode) pairs",
         "cost_ratio_episode_iqm": "IQM over every (run, episode): the spread over episodes, for reference",
-        "train_seconds_median": "median over runs of the training wall time when the run was trained",
+        "train_seconds_median": "median over runs of the training wall time when the run was trained (a jitted "
+                                "agent's seeds train vmapped in one task: a run's time is the task's training wall "
+                                "time, compilation and learning curves included, divided by its number of seeds; "
+                                "each run's result.json train_seconds_shared has the whole)",
     }
     if fault_free is not None:
         metrics_doc["degradation"] = DEGRADATION_DOC

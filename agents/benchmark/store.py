@@ -26,7 +26,8 @@ MARKER = ".dobs-envs-benchmark"
 _TOP_FILES = ("summary.json", "summary.png")
 _ENV_FILES = ("results.json", "results.md", "results.csv", "error_norms.png", "learning_curves.png")
 #: files a training run (``agents.training.train``) and the benchmark write in a run directory
-_RUN_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "result.json")
+_RUN_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "replay_buffer.pkl", "curve.json", "result.json",
+              "policy.npz", "policy.json", "train_curve.json")
 
 
 class OutDirError(ValueError):
@@ -83,7 +84,8 @@ def foreign_entries(out: str) -> list[str]:
 
     The rule. The benchmark writes ``out/{MARKER}`` first, then only the layout
     ``models/<env>/<budget>/<agent>/s<seed>/`` (run files: config.json, model.zip,
-    vecnormalize.pkl, replay_buffer.pkl, curve.json, result.json, checkpoints/), ``<env>/results.{json,md,csv}``,
+    vecnormalize.pkl, replay_buffer.pkl, curve.json, result.json, checkpoints/; a jitted run's policy.npz,
+    policy.json, train_curve.json), ``<env>/results.{json,md,csv}``,
     ``<env>/error_norms.png``, ``<env>/learning_curves.png``, ``summary.json`` and ``summary.png``
     (``<env>``, ``<budget>``, ``<agent>``: the known names, ``<agent>@recipe`` included). An entry outside that layout is foreign.
     The output files (``summary.*``, ``<env>/*``) are the benchmark's only when the marker is there,
@@ -132,10 +134,12 @@ def claim_out_dir(out: str, *, overwrite: bool = False) -> None:
 
 # ---------------------------------------------------------------------- run records (written by the driver)
 #: the files of a trained run a worker returns (``result.json`` is the record's ``result``, written last);
-#: the benchmark trains without checkpoints, and a complete run keeps no replay buffer
-RECORD_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "curve.json")
-#: the files a kept model is evaluated again from (:func:`agents.training.loading.load_agent`)
-MODEL_FILES = ("config.json", "model.zip", "vecnormalize.pkl")
+#: the benchmark trains without checkpoints, and a complete run keeps no replay buffer; a jitted run
+#: (:mod:`agents.training.jax`) has its exported policy and its trainer's curve instead of model and normaliser
+RECORD_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "curve.json", "policy.npz", "policy.json",
+                "train_curve.json")
+#: the files a kept model is evaluated again from (:func:`agents.training.loading.load_agent`; those present)
+MODEL_FILES = ("config.json", "model.zip", "vecnormalize.pkl", "policy.npz", "policy.json")
 
 
 def write_record(path: str, record: dict) -> None:

@@ -1,5 +1,6 @@
 """The benchmark's work units, run by an execution backend (:mod:`agents.benchmark.backends`) in a worker:
-train and evaluate one (env, agent, seed) run (:func:`train_and_evaluate`), evaluate a kept model
+train and evaluate one (env, agent, seed) run (:func:`train_and_evaluate`), a jitted agent's seeds of one env
+vmapped in one compiled run and each of them evaluated (:func:`train_seeds_and_evaluate`), evaluate a kept model
 again on other episodes (:func:`reevaluate`), evaluate the analytic controllers of one env
 (:func:`analytic_results`) and, for an env with faults, the paper's controller on its fault-free counterpart
 (:func:`fault_free_paper`).
@@ -12,6 +13,7 @@ computes does not depend on where it runs: the same spec gives the same record o
 """
 from __future__ import annotations
 
+import json
 import os
 import socket
 import sys
@@ -25,7 +27,7 @@ from ..evaluate import evaluate_policy
 from .plan import ANALYTIC, _run_signature, _training_overrides, agent_spec
 from .store import RECORD_FILES, read_run_files
 
-__all__ = ["train_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
+__all__ = ["train_and_evaluate", "train_seeds_and_evaluate", "reevaluate", "analytic_results", "fault_free_paper", "compile_kernels",
            "mean_trajectory", "executed_on"]
 
 
@@ -91,6 +93,58 @@ def train_and_evaluate(spec: dict, scratch: str | None = None) -> dict:
               callbacks=[curve], checkpoint_freq=0)
         result = _evaluate(spec, path, time.perf_counter() - t0, curve.points)
         return {"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False}
+
+
+def train_seeds_and_evaluate(specs: list[dict], scratch: str | None = None) -> list[dict]:
+    """Train the runs ``specs`` of one jitted agent on one env (the same spec but for the seed) as ONE compiled
+    run vmapped over their seeds (:func:`agents.training.jax.vmap_seeds.train_jax_seeds`), in a scratch
+    directory, and evaluate each: one record per run, as :func:`train_and_evaluate`'s. A vmapped run's
+    ``train_seconds`` is its share, the whole task's training wall time (setup, compilation, the vmapped run, the
+    learning curves) divided by the number of seeds, and ``train_seconds_shared`` records ``{"seconds": that time,
+    "runs": seeds}``; a run trained alone (one seed) records its own ``total_seconds``. ``jax_enable_x64`` (an env
+    with communication faults switches it on) is restored afterwards: the worker's next job runs as before.
+
+    The budget's env options train the jitted run too (:func:`agents.benchmark.plan.jax_env_options`); its learning
+    curve is scored on the env's own episodes (:mod:`agents.training.jax.run`'s), which differ from the budget's
+    only in ``tiny`` (20-step episodes there, 400 for the curve)."""
+    first = specs[0]
+    differ = [k for k in ("env", "agent", "steps", "hp", "env_kwargs", "curve_seeds", "curve_points", "threads")
+            if any(sp[k] != first[k] for sp in specs)]
+    if differ:
+        raise ValueError(f"vmapped seeds must share their run's configuration; {differ} differ")
+    a = agent_spec(first["agent"])
+    import jax
+
+    x64 = jax.config.jax_enable_x64
+    with tempfile.TemporaryDirectory(prefix="runs-", dir=scratch) as root:
+        try:
+            return _train_seeds(specs, a, root)
+        finally:
+            jax.config.update("jax_enable_x64", x64)
+
+
+def _train_seeds(specs: list[dict], a, root: str) -> list[dict]:
+    """:func:`train_seeds_and_evaluate`'s work in the scratch directory ``root``."""
+    from ..training.jax.vmap_seeds import train_jax_seeds
+
+    first = specs[0]
+    paths = [os.path.join(root, f"s{sp['seed']}") for sp in specs]
+    t0 = time.perf_counter()
+    runs = train_jax_seeds(first["env"], a.algo, multi_agent=a.multi_agent, seeds=[sp["seed"] for sp in specs],
+                           outs=paths, timesteps=first["steps"], hyperparams=_training_overrides(first) or None,
+                           threads=first["threads"], progress=False, curve_points=first["curve_points"],
+                           curve_seeds=first["curve_seeds"])
+    seconds = time.perf_counter() - t0
+    records = []
+    for sp, path, run in zip(specs, paths, runs):
+        with open(os.path.join(path, "curve.json")) as fh:
+            curve = json.load(fh)["points"]
+        shared = "vmapped" in run.config  # else trained alone (one seed, or no vmapped builder): its own time
+        result = _evaluate(sp, path, seconds / len(specs) if shared else run.config["total_seconds"], curve)
+        if shared:
+            result["train_seconds_shared"] = {"seconds": seconds, "runs": len(specs)}
+        records.append({"result": result, "files": read_run_files(path, RECORD_FILES), "reevaluated": False})
+    return records
 
 
 def reevaluate(spec: dict, files: dict, previous: dict, scratch: str | None = None) -> dict:

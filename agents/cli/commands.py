@@ -11,7 +11,7 @@ from collections import Counter
 
 from dobs_envs.paths import OutputPathError, check_output_dir, check_output_file
 
-from ..benchmark.plan import AGENTS, BUDGETS
+from ..benchmark.plan import AGENTS
 from ..config.envs import ENVS
 from ..training.seeds import TUNING, check_training_seeds
 
@@ -285,7 +285,8 @@ def benchmark_command(args) -> int:
     from ..benchmark.plan import RunConflictError, plan_runs
     from ..benchmark.store import OutDirError, foreign_entries
 
-    from ..benchmark.plan import RECIPE_SUFFIX
+    from ..benchmark.plan import RECIPE_SUFFIX, agent_spec, default_agents
+    from ..benchmark.plan import TRAINERS as BENCHMARK_TRAINERS
     from ..config.hyperparam_files import HyperparamsError
 
     t0 = time.perf_counter()
@@ -321,7 +322,19 @@ def benchmark_command(args) -> int:
         if unknown:
             _usage_error(f"--agents: unknown agents {unknown}; choose from {sorted(AGENTS)}"
                          + (f" or {sorted(variants)}" if variants else " (AGENT@recipe needs --recipe AGENT=FILE)"))
-    trained = agents if agents is not None else [*BUDGETS[args.budget]["agents"], *(k + RECIPE_SUFFIX for k in recipes)]
+    trainer = args.trainer or "sb3"
+    if args.trainer is not None and agents is not None:
+        other = [a for a in agents if agent_spec(a).trainer not in BENCHMARK_TRAINERS[trainer]]
+        if other:
+            _usage_error(f"--agents {','.join(other)}: not trained by --trainer {trainer} (its agents: "
+                         f"{','.join(k for k in AGENTS if AGENTS[k].trainer in BENCHMARK_TRAINERS[trainer])}); "
+                         f"drop --trainer to train the agents named")
+    jitted_recipes = [k for k in recipes if AGENTS[k].trainer != "sb3"]
+    if jitted_recipes:
+        _usage_error(f"--recipe {jitted_recipes[0]}=...: recipe files are for the SB3 agents; "
+                     f"{jitted_recipes[0]} trains with the jitted trainer")
+    trained = agents if agents is not None else [*default_agents(args.budget, trainer),
+                                                 *(k + RECIPE_SUFFIX for k in recipes)]
     for name in agent_seeds:
         if name not in trained:
             _usage_error(f"--agent-seeds names {name!r}, which this benchmark does not train; its agents: "
@@ -349,11 +362,16 @@ def benchmark_command(args) -> int:
     try:  # the arguments argparse cannot check, as a usage error
         plan = plan_runs(args.env, args.budget, args.out, seed=args.seed, eval_seed=args.eval_seed,
                          episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
-                         recipes=recipes, agent_seeds=agent_seeds)
+                         recipes=recipes, agent_seeds=agent_seeds, trainer=trainer)
     except HyperparamsError as exc:  # a recipe file without the env's section, or unreadable
         _usage_error(f"--recipe: {exc}")
     except ValueError as exc:
         _usage_error(str(exc))
+    jitted = [k for k in plan.steps if agent_spec(k).trainer == "jax"]
+    missing = [m for m in ("jax", "optax") if importlib.util.find_spec(m) is None]
+    if jitted and missing and not args.dry_run:
+        _usage_error(f"the jitted agents ({', '.join(jitted)}) need the jax extra ({missing[0]} is missing): "
+                     f"pip install 'dobs-envs[jax]'")
     if args.dry_run:
         return _benchmark_dry_run(args, plan)
     try:
@@ -361,7 +379,7 @@ def benchmark_command(args) -> int:
                              episodes=args.episodes, timesteps=args.timesteps, agents=agents, seeds=args.seeds,
                              workers=args.workers, progress=not args.no_progress, overwrite=args.overwrite,
                              backend=args.backend, address=args.address, recipes=recipes,
-                             agent_seeds=agent_seeds)
+                             agent_seeds=agent_seeds, trainer=trainer)
     except OutDirError as exc:  # the directory changed since the check above
         _usage_error(f"--out {exc}")
     except ConnectionError as exc:  # --address: no Ray cluster there
@@ -395,7 +413,7 @@ def benchmark_command(args) -> int:
 
 def _benchmark_dry_run(args, plan) -> int:
     """``benchmark --dry-run``: which runs would train, which stored results are reused (nothing written)."""
-    from ..benchmark.plan import pending_runs, reevaluated_runs, replaced_runs
+    from ..benchmark.plan import agent_spec, pending_runs, reevaluated_runs, replaced_runs
 
     todo, again = pending_runs(plan), reevaluated_runs(plan)
     clash = {sp["path"] for sp in replaced_runs(todo)}
@@ -405,6 +423,9 @@ def _benchmark_dry_run(args, plan) -> int:
     key = lambda sp: (sp["env"], sp["agent"], sp["seed"])  # noqa: E731
     for sp in sorted(todo, key=key):
         note = " (replaces a finished run of another configuration: needs --overwrite)" if sp["path"] in clash else ""
+        if agent_spec(sp["agent"]).trainer == "jax":
+            n = sum(o["env"] == sp["env"] and o["agent"] == sp["agent"] for o in todo)
+            note += f" (jitted: {n} seeds in one vmapped task)" if n > 1 else " (jitted)"
         print(f"  train {sp['env']} {sp['agent']} seed {sp['seed']}: {sp['steps']} steps -> {sp['path']}{note}")
     for sp in sorted(again, key=key):
         print(f"  evaluate again {sp['env']} {sp['agent']} seed {sp['seed']} -> {sp['path']}")

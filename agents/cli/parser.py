@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..benchmark.backends import BACKENDS
-from ..benchmark.plan import AGENTS, BUDGETS
+from ..benchmark.plan import AGENTS, BUDGETS, TRAINERS as BENCHMARK_TRAINERS
 from ..config.envs import ENVS, FAULT_FREE, TASKS
 from ..config.hyperparam_files import ALGOS
 from ..training.seeds import EVALUATION, TRAINING, TUNING
@@ -103,6 +103,11 @@ def add_parser(sub) -> None:
     p.add_argument("--episodes", type=_positive_int, default=None, help="evaluation episodes (default: the budget's)")
     p.add_argument("--timesteps", type=_positive_int, default=None, help="override every agent's training budget")
     p.add_argument("--agents", default=None, help=f"comma-separated subset of {','.join(AGENTS)}")
+    p.add_argument("--trainer", choices=tuple(BENCHMARK_TRAINERS), default=None,
+                   help="the learned rows of the default agent set: sb3 (default: the Stable-Baselines3 / SBX agents), "
+                        "jax (the jitted agents, agents.training.jax: each env's seeds of an agent vmapped in one "
+                        "compiled run, each seed a run of the table) or all (both); the analytic rows are always "
+                        "there; with --agents, the agents named must be of this trainer")
     p.add_argument("--recipe", action="append", default=None, metavar="AGENT=FILE",
                    help="also train AGENT with the recipe file FILE (rl-zoo3 format, e.g. dobs-envs tune's best.yml; "
                         "its section for the env: the Gymnasium id's, else default; the budget's overrides apply over "
