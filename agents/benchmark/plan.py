@@ -78,6 +78,7 @@ AGENTS = {
     # the jitted trainer (agents.training.jax; its algorithms: agents.training.jax.ALGOS)
     "ppo_jax": AgentSpec("ppo", False, None, "PPO (JAX)", trainer="jax", counterpart="ppo"),
     "ppo_ma_jax": AgentSpec("ppo", True, None, "PPO (JAX, shared)", trainer="jax", counterpart="ppo_ma"),
+    "sac_jax": AgentSpec("sac", False, None, "SAC (JAX)", trainer="jax", counterpart="sac"),
 }
 #: ``benchmark --trainer``: the learned rows of the default agent set (the analytic rows are always there)
 TRAINERS = {"sb3": ("sb3",), "jax": ("jax",), "all": ("sb3", "jax")}
@@ -93,6 +94,7 @@ BUDGETS = {
             "crossq": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
             # the jitted agents' overrides: "<algo>_jax" (AgentSpec.hp_key)
             "ppo_jax": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1},
+            "sac_jax": {"learning_starts": 32, "batch_size": 32, "buffer_size": 1000},
         },
     },
     "quick": {

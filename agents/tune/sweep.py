@@ -69,7 +69,8 @@ def sample_floats(recipe_floats: dict, draws: int, seed: int) -> list[dict]:
     names = list(FLOAT_SPACE)
     out = [{k: float(recipe_floats[k]) for k in names}]
     if draws > 1:
-        u = qmc.Sobol(len(names), scramble=True, seed=seed).random(draws - 1)
+        # the first draws - 1 points of the sequence (Sobol's balance holds for a power of 2: draws = 2^k + 1)
+        u = qmc.Sobol(len(names), scramble=True, seed=seed).random_base2(math.ceil(math.log2(draws - 1)))[:draws - 1]
         for row in u:
             point = {}
             for k, x in zip(names, row):
@@ -233,7 +234,12 @@ def main(argv=None) -> int:
     ap.add_argument("--sampler-seed", type=int, default=0)
     ap.add_argument("--out", required=True)
     ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--threads", type=int, default=1, help="XLA threads (1: one core, as the benchmark's runs; 0: "
+                    "XLA's default pool)")
     args = ap.parse_args(argv)
+    from ..training.train import xla_threads
+
+    xla_threads(args.threads if args.threads > 0 else None)
     structures = None
     if args.structures:
         try:
