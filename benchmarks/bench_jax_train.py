@@ -1,8 +1,9 @@
 """Issue 40's first target: a 600k-step jitted PPO run on tracking beside SB3 PPO's, one core each
 (``--algo sac`` / ``td3``: the jitted SAC / TD3 beside SBX's, the project's off-policy rows).
 
-Both train PPO with the shipped tracking recipe (``agents/hyperparams/ppo.yaml``, read through
-``agents.training.recipes.resolve_recipe``): the jitted trainer (``agents.training.jax``, one compiled function
+Both train PPO with their shipped tracking recipe (``agents/config/hyperparams/ppo.yaml``, read through
+``agents.training.recipes.resolve_recipe``; the jitted trainer's with the file's ``-jax`` sections, its own tuned
+recipe where the file has one, ``trainer="jax"``): the jitted trainer (``agents.training.jax``, one compiled function
 on ``dobs_envs.jax``, float32) in this process, then SB3 PPO through the project's SB3 training entry
 (``agents.training.train.train``, what ``dobs-envs train --algo ppo --env tracking`` calls, torch on one thread)
 in a child process of this script. One core each: XLA on one thread (``PJRT_NPROC=1``,
@@ -98,7 +99,7 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1, algo: str 
     else:
         from agents.training.jax.ppo import make_env, make_train, ppo_config as read_config
 
-    cfg, hp = read_config(resolve_recipe(algo, ENV).hyperparams, ENV_ID, total_timesteps=steps)
+    cfg, hp = read_config(resolve_recipe(algo, ENV, trainer="jax").hyperparams, ENV_ID, total_timesteps=steps)
     env, env_params = make_env(cfg)
     train = make_train(cfg, env, env_params)
     key = jax.random.PRNGKey(seed)

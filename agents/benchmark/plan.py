@@ -245,7 +245,7 @@ def _stored_result(spec: dict, *, training_only: bool = False) -> dict | None:
 
     a = agent_spec(spec["agent"])
     recipe = resolve_recipe(a.algo, spec["env"], multi_agent=a.multi_agent, hybrid=a.hybrid,
-                            overrides=_training_overrides(spec) or None)
+                            overrides=_training_overrides(spec) or None, trainer=a.trainer)
     return _finished_run(spec["path"], _run_signature(spec), recipe.hyperparams, training_only=training_only,
                          library=a.library)
 

@@ -38,7 +38,8 @@ Sections read by ``agents/`` only: ``<env>`` (settings rl-zoo3 cannot read, such
 
 Lookup (each section replaces the keys it sets, as YAML's merge key does): ``default``,
 ``default-ma`` (multi-agent), the Gymnasium id's section, ``<env>``, ``<env>-ma`` (multi-agent),
-then ``default-<variant>``, ``<env>-<variant>``, ``<env>-ma-<variant>`` (multi-agent). A
+then ``default-<variant>``, ``<env>-<variant>``, ``<env>-ma-<variant>`` (multi-agent), then for the jitted
+trainer (``trainer="jax"``) ``default-jax`` and ``<env>-jax`` (centralised) or ``<env>-ma-jax`` (multi-agent). A
 centralised, pure-RL recipe is therefore the section rl-zoo3 reads, updated by the env's ``<env>``
 section where the file has one (rl-zoo3 trains without those settings).
 
@@ -60,7 +61,8 @@ import yaml
 from .envs import ENVS, env_key, gym_id
 
 __all__ = ["ALGOS", "MULTI_AGENT_ALGOS", "OFF_POLICY_ALGOS", "NOISE_TYPES", "HYPERPARAMS_DIR", "load_hyperparams",
-           "read_hyperparams_file", "parse_kwargs_string", "HyperparamsError", "ACTIVATIONS", "VARIANTS"]
+           "read_hyperparams_file", "parse_kwargs_string", "HyperparamsError", "ACTIVATIONS", "VARIANTS",
+           "TRAINERS"]
 
 #: the hyperparameter files, ``<algo>.yaml`` (package data)
 HYPERPARAMS_DIR = os.path.join(os.path.dirname(__file__), "hyperparams")
@@ -74,6 +76,10 @@ OFF_POLICY_ALGOS = ("sac", "td3", "crossq")
 
 #: hybrid variants with their own sections (``default-<variant>``; :mod:`agents.training.hybrid`)
 VARIANTS = ("residual", "bc")
+#: trainers with their own sections, read after all others (``default-jax``, then ``<env>-jax`` or, multi-agent,
+#: ``<env>-ma-jax``: what
+#: the jitted trainer, :mod:`agents.training.jax`, trains differently, e.g. its tuned recipe; ``sb3`` has none)
+TRAINERS = ("sb3", "jax")
 
 #: activation names accepted in ``policy_kwargs`` -> ``torch.nn`` class name
 ACTIVATIONS = {"tanh": "Tanh", "relu": "ReLU", "elu": "ELU", "leaky_relu": "LeakyReLU", "gelu": "GELU"}
@@ -232,7 +238,8 @@ def _rescale_wrapper(value, where: str) -> bool:
 
 
 def _is_agents_only(section: str) -> bool:
-    return section in ENVS or section.endswith("-ma") or any(section.endswith(f"-{v}") for v in VARIANTS)
+    return (section in ENVS or section.endswith("-ma")
+            or any(section.endswith(f"-{v}") for v in VARIANTS + TRAINERS[1:]))
 
 
 def read_hyperparams_file(path: str) -> dict[str, dict]:
@@ -277,7 +284,7 @@ def _merge(base: dict, over: dict) -> dict:
 
 
 def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, overrides: dict | None = None,
-                     variant: str | None = None) -> dict:
+                     variant: str | None = None, trainer: str = "sb3") -> dict:
     """Hyperparameters of ``algo`` on ``env`` (see the module doc for the lookup).
 
     File sections replace the keys they set (as rl-zoo3 and YAML's merge key do);
@@ -291,6 +298,11 @@ def load_hyperparams(algo: str, env: str, *, multi_agent: bool = False, override
     keys += [f"{name}-ma"] if multi_agent else []
     if variant:
         keys += [f"default-{variant}", f"{name}-{variant}"] + ([f"{name}-ma-{variant}"] if multi_agent else [])
+    if trainer not in TRAINERS:
+        raise ValueError(f"trainer must be one of {TRAINERS}, got {trainer!r}")
+    if trainer != "sb3":
+        # the centralised recipe's section is not the shared one's: <env>-jax or <env>-ma-jax, not both
+        keys += [f"default-{trainer}", f"{name}-ma-{trainer}" if multi_agent else f"{name}-{trainer}"]
     hp: dict = {}
     for k in dict.fromkeys(keys):  # "default" once even when env is "default"
         hp.update(copy.deepcopy(table.get(k, {})))

@@ -59,10 +59,12 @@ class Recipe:
 
 
 def resolve_recipe(algo: str, env_name: str, *, multi_agent: bool = False, hybrid: str | None = None,
-                   overrides: dict | None = None) -> Recipe:
-    """The :class:`Recipe` of ``algo`` on ``env_name`` (see :func:`agents.config.hyperparam_files.load_hyperparams`)."""
+                   overrides: dict | None = None, trainer: str = "sb3") -> Recipe:
+    """The :class:`Recipe` of ``algo`` on ``env_name`` (see :func:`agents.config.hyperparam_files.load_hyperparams`;
+    ``trainer="jax"``: with the jitted trainer's sections)."""
     algo = algo.lower()
-    hp = load_hyperparams(algo, env_name, multi_agent=multi_agent, overrides=overrides, variant=hybrid)
+    hp = load_hyperparams(algo, env_name, multi_agent=multi_agent, overrides=overrides, variant=hybrid,
+                          trainer=trainer)
     return recipe_from_hyperparams(algo, env_name, hp, multi_agent=multi_agent, hybrid=hybrid)
 
 

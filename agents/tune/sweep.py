@@ -139,8 +139,8 @@ def run_sweep(env_name: str, *, timesteps: int, structures: list[dict] | None = 
               seeds=(0, 1), episodes: int = 5, sampler_seed: int = 0, out: str, dtype: str = "float32",
               overwrite: bool = False, log=print) -> dict:
     """Sweep the jitted PPO on ``env_name`` (module doc); writes ``out/sweep.json`` and ``out/best.yml`` and
-    returns the record. The recipe is the shipped PPO recipe of the env
-    (:func:`agents.training.recipes.resolve_recipe`), each structure's keys merged over it."""
+    returns the record. The recipe is the jitted trainer's shipped PPO recipe of the env
+    (:func:`agents.training.recipes.resolve_recipe` with ``trainer="jax"``), each structure's keys merged over it."""
     from ..training.curves import paper_costs
     from ..training.recipes import resolve_recipe
 
@@ -153,7 +153,7 @@ def run_sweep(env_name: str, *, timesteps: int, structures: list[dict] | None = 
         raise FileExistsError(f"{path} exists (a finished or interrupted sweep): choose another --out or pass "
                               "--overwrite")
     os.makedirs(out, exist_ok=True)
-    recipe = resolve_recipe("ppo", env_name)
+    recipe = resolve_recipe("ppo", env_name, trainer="jax")  # the jitted trainer's recipe: its sections too
     base = dict(recipe.hyperparams)
     structures = [dict(s) for s in (structures or STRUCTURES)]
     paper = paper_costs(env_name, {}, episode_seeds)

@@ -179,7 +179,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
         # (docs/jax.md); the run still simulates and trains in float32 (the config's dtype)
         jax.config.update("jax_enable_x64", True)
-    recipe = resolve_recipe(algo, env, overrides=hyperparams)
+    recipe = resolve_recipe(algo, env, overrides=hyperparams, trainer=TRAINER)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
         cfg, hp = read_config(recipe.hyperparams, gid, total_timesteps=timesteps)

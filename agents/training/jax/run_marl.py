@@ -125,7 +125,7 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
 
     if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as .run.train_jax)
-    recipe = resolve_recipe(algo, env, multi_agent=True, overrides=hyperparams)
+    recipe = resolve_recipe(algo, env, multi_agent=True, overrides=hyperparams, trainer=TRAINER)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
         cfg, hp = ippo_config(recipe.hyperparams, env, total_timesteps=timesteps)

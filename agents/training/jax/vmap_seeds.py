@@ -68,7 +68,7 @@ def _ppo(env: str, gid: str, hyperparams: dict | None, timesteps: int | None, cu
     from .ppo import make_env, make_train, ppo_config
     from .run import _curve
 
-    recipe = resolve_recipe("ppo", env, overrides=hyperparams)
+    recipe = resolve_recipe("ppo", env, overrides=hyperparams, trainer=TRAINER)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
         cfg, hp = ppo_config(recipe.hyperparams, gid, total_timesteps=timesteps)
@@ -100,7 +100,7 @@ def _ppo_shared(env: str, gid: str, hyperparams: dict | None, timesteps: int | N
     from .ippo import ippo_config, make_marl_env, make_train, slot_layout
     from .run_marl import _marl_curve, shared_export
 
-    recipe = resolve_recipe("ppo", env, multi_agent=True, overrides=hyperparams)
+    recipe = resolve_recipe("ppo", env, multi_agent=True, overrides=hyperparams, trainer=TRAINER)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
         cfg, hp = ippo_config(recipe.hyperparams, env, total_timesteps=timesteps)
