@@ -31,6 +31,10 @@ ARCHIVES = {
                                      {"hetero_mas": ("docs/results/tuned_ppo.md",
                                                     "## The tuned PPO recipe on hetero_mas (full budget)")}, ["ppo"]),
     # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
+    # issue 40: the jitted PPO, 10 seeds vmapped in one call, with its own tracking recipe (tracking-jax)
+    "tracking_full_jax_runs.tar.gz": ("tracking", "full", 10,
+                                      {"tracking": ("docs/results/full_tracking_jax.md",
+                                                    "## The jitted PPO (full budget, tracking)")}, ["ppo_jax"]),
     "tracking_full_runs.tar.gz": ("tracking", "full", 90,
                                   {"tracking": ("docs/results/full_tracking.md",
                                                 "## RL versus the paper's controller (full budget, tracking)")}, None),
