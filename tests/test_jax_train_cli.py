@@ -16,8 +16,9 @@ pytest.importorskip("optax")
 
 from dobs_envs.cli import main  # noqa: E402
 
-#: a smaller rollout than the recipe's 8 x 512 (2 updates within --timesteps 2048: a curve of 3 points)
-HP = {"n_steps": 128, "n_epochs": 2}
+#: a smaller rollout than the jitted trainer's tracking recipe (tracking-jax: 64 x 128; SB3's 8 x 512): 8 x 128 with
+#: minibatches of 256 (2 updates within --timesteps 2048: a curve of 3 points)
+HP = {"n_envs": 8, "n_steps": 128, "batch_size": 256, "n_epochs": 2}
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +51,8 @@ def test_run_directory_records(jax_run):
     assert cfg["timesteps"] == 2048 and cfg["timesteps_done"] == 2048 and cfg["n_updates"] == 2
     assert cfg["status"] == "complete"
     # the recipe: SB3 PPO's (agents/config/hyperparams/ppo.yaml) with the --hyperparams overrides
-    assert cfg["hyperparams"] == json.loads(json.dumps(resolve_recipe("ppo", "tracking", overrides=HP).hyperparams))
+    recipe = resolve_recipe("ppo", "tracking", overrides=HP, trainer="jax")  # the jitted trainer's recipe
+    assert cfg["hyperparams"] == json.loads(json.dumps(recipe.hyperparams))
     for k in ("setup_seconds", "compile_seconds", "compile_cpu_seconds", "train_seconds", "train_cpu_seconds",
               "curve_seconds"):
         assert math.isfinite(cfg[k]) and cfg[k] > 0, k
