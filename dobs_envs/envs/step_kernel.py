@@ -18,7 +18,7 @@ which threads may run concurrently on disjoint ranges: it releases the GIL):
    observations and feature vector are cleaned (NaN -> 0, +-inf -> +-largest finite value of
    their dtype); otherwise truncation (reason 3) when ``cycles >= max_cycles >= 0``.
 
-Communication faults (the core's ``faults`` option, issue 23): the argument ``fault`` is
+Communication faults (the core's ``faults`` option): the argument ``fault`` is
 :data:`~dobs_envs.sim.fault_state.NO_FAULT` (an empty tuple: numba compiles the step without any fault
 code, the ``if len(fault) == 0:`` branches are pruned per specialisation, both ways) or the plain tuple ``(fp, fs, rx, fconsts)`` of :func:`~dobs_envs.envs.features.env_fault`.
 Then step 3 is the faulted control period (:class:`~dobs_envs.sim.fault_kernel.FaultPeriod`), step 4

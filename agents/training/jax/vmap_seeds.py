@@ -1,4 +1,4 @@
-"""Several training seeds of one jitted agent as ONE compiled function vmapped over the seeds (issue 40).
+"""Several training seeds of one jitted agent as ONE compiled function vmapped over the seeds.
 
 :func:`train_jax_seeds` builds the run as :func:`.run.train_jax` (centralised PPO) or :func:`.run_marl.train_jax_marl`
 (shared PPO) do, from the same recipe, compiles ``jax.vmap(train)`` over the seeds' keys ``jax.random.PRNGKey(seed)``
