@@ -1,10 +1,11 @@
 """Several training seeds of one jitted agent as ONE compiled function vmapped over the seeds.
 
-:func:`train_jax_seeds` builds the run as :func:`.run.train_jax` (centralised PPO) or :func:`.run_marl.train_jax_marl`
-(shared PPO) do, from the same recipe, compiles ``jax.vmap(train)`` over the seeds' keys ``jax.random.PRNGKey(seed)``
-once, runs it, and writes one ordinary run directory per seed: the files those functions write (``config.json``,
-``policy.npz`` + ``policy.json``, ``curve.json``, ``train_curve.json``), each with its own seed, so that every
-directory is one run for ``evaluate --model`` and the benchmark (the run is the statistical unit).
+:func:`train_jax_seeds` builds the run as :func:`.run.train_jax` (centralised PPO, SAC, TD3) or
+:func:`.run_marl.train_jax_marl` (shared PPO) do, from the same recipe, compiles ``jax.vmap(train)`` over the seeds'
+keys ``jax.random.PRNGKey(seed)`` once, runs it, and writes one ordinary run directory per seed: the files those
+functions write (``config.json``, ``policy.npz`` + ``policy.json``, ``curve.json``, ``train_curve.json``), each with
+its own seed, so that every directory is one run for ``evaluate --model`` and the benchmark (the run is the
+statistical unit).
 
 Times: the vmapped phases serve every seed at once, so a run's ``setup_seconds``, ``compile_seconds`` /
 ``compile_cpu_seconds`` and ``train_seconds`` / ``train_cpu_seconds`` are its share, the vmapped run's figure divided
@@ -18,13 +19,20 @@ are trained one after another by :func:`.run.train_jax` / :func:`.run_marl.train
 shared times), so every jitted algorithm has multi-seed runs and a vmapped builder is an optimisation.
 
 A vmapped seed's run equals its single run up to float32 round-off (the batched and the single program are compiled
-separately; tests/test_agents_benchmark_jax.py); a run is reproduced exactly by the same group of seeds.
+separately; tests/test_agents_benchmark_jax.py, tests/test_jax_vmap_offpolicy.py); a run is reproduced exactly by the
+same group of seeds.
 
 The vmapped algorithms: :data:`BUILDERS`, ``(algo, multi_agent) -> builder`` (a builder returns the
 :class:`VmapRun` of a recipe).
+
+Cost: on one XLA thread a vmapped run's compiled part takes about the CPU time of its seeds run one after another
+(SAC's shipped tracking recipe, 10 seeds x 20k env steps, benchmarks/bench_vmap_seeds.py: 0.99x per run, measured
+on a shared 2-core machine); what the seeds share is the compilation (28 s CPU for the 10 seeds against 19 s for
+each single run there).
 """
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import time
@@ -60,23 +68,27 @@ class VmapRun(NamedTuple):
     describe: str
 
 
-def _ppo(env: str, gid: str, hyperparams: dict | None, timesteps: int | None, curve_points: int,
-         seeds: list) -> VmapRun:
-    """Centralised PPO: :func:`.run.train_jax`'s run."""
+def _centralised(algo: str, env: str, gid: str, hyperparams: dict | None, timesteps: int | None, curve_points: int,
+                 seeds: list) -> VmapRun:
+    """Centralised PPO, SAC or TD3: :func:`.run.train_jax`'s run (its recipe reader, env, ``make_train``, export and
+    learning curve; ``algo``: ``"ppo"``, ``"sac"`` or ``"td3"``)."""
+    import importlib
+
     from ..recipes import resolve_recipe
     from .export import save_policy
-    from .ppo import make_env, make_train, ppo_config
-    from .run import _curve
+    from .run import _ALGO_MODULES, _curve, _rollout
 
-    recipe = resolve_recipe("ppo", env, overrides=hyperparams, trainer=TRAINER)
+    module_name, config_name = _ALGO_MODULES[algo]
+    module = importlib.import_module(f"{__package__}.{module_name}")
+    recipe = resolve_recipe(algo, env, overrides=hyperparams, trainer=TRAINER)
     timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
     try:
-        cfg, hp = ppo_config(recipe.hyperparams, gid, total_timesteps=timesteps)
-        env_jax, env_params = make_env(cfg)
+        cfg, hp = getattr(module, config_name)(recipe.hyperparams, gid, total_timesteps=timesteps)
+        env_jax, env_params = module.make_env(cfg)
     except ValueError as exc:
-        raise JaxRunError(f"the ppo recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
+        raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
     updates = curve_updates(cfg.n_updates, curve_points)
-    rollout = cfg.n_envs * cfg.n_steps
+    rollout = _rollout(cfg)
     config = {"env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "timesteps": timesteps,
               "n_updates": cfg.n_updates, "rollout": rollout, "n_agents": 1,
               "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
@@ -88,8 +100,8 @@ def _ppo(env: str, gid: str, hyperparams: dict | None, timesteps: int | None, cu
     def curve(result):
         return _curve(result["snapshots"], updates, rollout, cfg, hp, env_jax, env_params, env, seeds)
 
-    return VmapRun(make_train(cfg, env_jax, env_params, snapshots=updates), hp, updates, config, cfg.steps_done,
-                   export, curve, f"{cfg.n_updates} updates of {cfg.n_envs} x {cfg.n_steps} steps")
+    return VmapRun(module.make_train(cfg, env_jax, env_params, snapshots=updates), hp, updates, config,
+                   cfg.steps_done, export, curve, f"{cfg.n_updates} updates of {rollout} env steps")
 
 
 def _ppo_shared(env: str, gid: str, hyperparams: dict | None, timesteps: int | None, curve_points: int,
@@ -130,7 +142,8 @@ def _ppo_shared(env: str, gid: str, hyperparams: dict | None, timesteps: int | N
 
 
 #: ``(algo, multi_agent) -> builder(env, gym id, hyperparams, timesteps, curve_points, curve seeds) -> VmapRun``
-BUILDERS = {("ppo", False): _ppo, ("ppo", True): _ppo_shared}
+BUILDERS = {**{(a, False): functools.partial(_centralised, a) for a in ("ppo", "sac", "td3")},
+            ("ppo", True): _ppo_shared}
 
 
 def _check_seeds(seeds, outs) -> list[int]:
