@@ -52,6 +52,7 @@ import optax
 
 from . import normalize as nz
 from . import policy as pol
+from .validate import float_dtype, pos_int, schedule, train_env_kwargs, vec_normalize
 
 __all__ = ["PPOConfig", "HPARAMS", "ppo_config", "make_env", "make_train", "VecSlots", "gymnax_slots"]
 
@@ -103,26 +104,6 @@ class PPOConfig:
         return self.n_envs * self.n_steps // self.batch_size
 
 
-def _schedule(name: str, value) -> tuple[float, bool]:
-    """``(x, linear)`` of a constant or an ``lin_x`` string (rl-zoo3's schedules)."""
-    if isinstance(value, str):
-        if not value.startswith("lin_"):
-            raise ValueError(f"{name} must be a number or 'lin_<number>', got {value!r}")
-        try:
-            return float(value[4:]), True
-        except ValueError:
-            raise ValueError(f"{name} must be a number or 'lin_<number>', got {value!r}") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name} must be a number or 'lin_<number>', got {value!r}")
-    return float(value), False
-
-
-def _pos_int(name: str, value) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
-
-
 def ppo_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, total_timesteps: int | None = None,
                dtype: str = "float32") -> tuple[PPOConfig, dict]:
     """``(config, hparams)`` of a recipe's hyperparameters (SB3/rl-zoo3 names, defaults SB3's).
@@ -160,37 +141,24 @@ def ppo_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
     if not isinstance(net_arch, (list, tuple)) or not net_arch:
         raise ValueError(f"policy_kwargs.net_arch must be a non-empty list of layer widths (shared by actor and "
                          f"critic), got {net_arch!r}")
-    net_arch = tuple(_pos_int("policy_kwargs.net_arch[i]", h) for h in net_arch)
+    net_arch = tuple(pos_int("policy_kwargs.net_arch[i]", h) for h in net_arch)
     activation = str(pk.get("activation_fn", "tanh")).lower().removeprefix("nn.")
     if activation not in pol.ACTIVATIONS:
         raise ValueError(f"policy_kwargs.activation_fn must be one of {list(pol.ACTIVATIONS)}, got "
                          f"{pk.get('activation_fn')!r}")
-    norm = hp.get("normalize", False)
-    if norm is True:
-        norm = {}
-    if norm is False or norm is None:
-        norm = {"norm_obs": False, "norm_reward": False}
-    if not isinstance(norm, dict):
-        raise ValueError(f"normalize must be true/false or a mapping of VecNormalize arguments, got {norm!r}")
-    bad = sorted(set(norm) - set(_NORMALIZE_KEYS))
-    if bad:
-        raise ValueError(f"normalize keys {bad} are not implemented; supported: {list(_NORMALIZE_KEYS)}")
-    lr, lr_linear = _schedule("learning_rate", hp.get("learning_rate", 3e-4))
-    clip, clip_linear = _schedule("clip_range", hp.get("clip_range", 0.2))
-    n_envs, n_steps = _pos_int("n_envs", hp.get("n_envs", 1)), _pos_int("n_steps", hp.get("n_steps", 2048))
-    batch = _pos_int("batch_size", hp.get("batch_size", 64))
+    norm = vec_normalize(hp.get("normalize", False), _NORMALIZE_KEYS)
+    lr, lr_linear = schedule("learning_rate", hp.get("learning_rate", 3e-4))
+    clip, clip_linear = schedule("clip_range", hp.get("clip_range", 0.2))
+    n_envs, n_steps = pos_int("n_envs", hp.get("n_envs", 1)), pos_int("n_steps", hp.get("n_steps", 2048))
+    batch = pos_int("batch_size", hp.get("batch_size", 64))
     if (n_envs * n_steps) % batch:
         raise ValueError(f"batch_size {batch} must divide n_envs * n_steps = {n_envs * n_steps} (equal minibatches)")
-    total = _pos_int("total_timesteps", hp.get("n_timesteps", 1_000_000) if total_timesteps is None
+    total = pos_int("total_timesteps", hp.get("n_timesteps", 1_000_000) if total_timesteps is None
                      else total_timesteps)
-    if dtype not in ("float32", "float64"):
-        raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
-    env_kwargs = dict(hp.get("env_kwargs") or {})
-    for k in ("normalized_actions", "dtype"):
-        if k in env_kwargs:
-            raise ValueError(f"env_kwargs may not set {k!r} (the trainer sets it: normalize_actions / dtype)")
+    float_dtype(dtype)
+    env_kwargs = train_env_kwargs(hp.get("env_kwargs"))
     cfg = PPOConfig(env_id=env_id, total_timesteps=total, n_envs=n_envs, n_steps=n_steps, batch_size=batch,
-                    n_epochs=_pos_int("n_epochs", hp.get("n_epochs", 10)), net_arch=net_arch, activation=activation,
+                    n_epochs=pos_int("n_epochs", hp.get("n_epochs", 10)), net_arch=net_arch, activation=activation,
                     lr_linear=lr_linear, clip_linear=clip_linear, norm_obs=bool(norm.get("norm_obs", True)),
                     norm_reward=bool(norm.get("norm_reward", True)),
                     normalize_actions=bool(hp.get("normalize_actions", False)),

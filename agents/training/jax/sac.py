@@ -25,7 +25,7 @@ project's SAC rows train with, :mod:`agents.training.algos`) driven by SB3's ``O
   ``alpha = exp(log alpha)`` starts at 1 (``"auto"``) or ``x`` (``"auto_x"``); a number is a constant alpha;
 - optimisers: Adam (``eps = 1e-8``) for the actor and the critics at ``learning_rate`` (``lin_x``: ``x p``,
   ``p = 1 - steps / total_timesteps`` after the collect: SB3's ``progress_remaining``), for ``log alpha`` at
-  the initial learning rate (SBX's ``lr_schedule(1)``);
+  the initial learning rate (SBX's ``lrschedule(1)``);
 - collection (SB3's ``collect_rollouts``): each collect takes ``train_freq`` steps of every copy; a step
   whose step count (before it) is below ``learning_starts`` takes uniform random actions in ``[-1, 1]``,
   the others ``tanh(mu + sigma eps)`` clipped to ``[-1, 1]`` (SBX's ``predict``); with ``use_sde``, ``eps (n_envs,
@@ -86,7 +86,8 @@ import optax
 
 from . import normalize as nz
 from .policy import ACTIVATIONS
-from .ppo import _pos_int, _schedule
+from .validate import (float_dtype, non_negative_int, pos_int, schedule, train_env_kwargs,
+                       vec_normalize)
 
 __all__ = ["SACConfig", "HPARAMS", "RECIPE_KEYS", "sac_config", "make_env", "make_train", "init_params",
            "actor_dist", "tanh_log_prob", "standard_normal", "q_values", "critic_loss", "actor_loss", "alpha_loss",
@@ -200,47 +201,32 @@ def offpolicy_fields(hyperparams: dict, recipe_keys: tuple, name: str, *, total_
     if not isinstance(net_arch, (list, tuple)) or not net_arch:
         raise ValueError(f"policy_kwargs.net_arch must be a non-empty list of layer widths (shared by actor and "
                          f"critics), got {net_arch!r}")
-    net_arch = tuple(_pos_int("policy_kwargs.net_arch[i]", h) for h in net_arch)
+    net_arch = tuple(pos_int("policy_kwargs.net_arch[i]", h) for h in net_arch)
     activation = str(pk.get("activation_fn", "relu")).lower().removeprefix("nn.")
     if activation not in ACTIVATIONS:
         raise ValueError(f"policy_kwargs.activation_fn must be one of {list(ACTIVATIONS)}, got "
                          f"{pk.get('activation_fn')!r}")
-    norm = hp.get("normalize", False)
-    if norm is True:
-        norm = {}
-    if norm is False or norm is None:
-        norm = {"norm_obs": False, "norm_reward": False}
-    if not isinstance(norm, dict):
-        raise ValueError(f"normalize must be true/false or a mapping of VecNormalize arguments, got {norm!r}")
-    bad = sorted(set(norm) - set(_NORMALIZE_KEYS))
-    if bad:
-        raise ValueError(f"normalize keys {bad} are not implemented; supported: {list(_NORMALIZE_KEYS)}")
-    lr, lr_linear = _schedule("learning_rate", hp.get("learning_rate", 3e-4))
+    norm = vec_normalize(hp.get("normalize", False), _NORMALIZE_KEYS)
+    lr, lr_linear = schedule("learning_rate", hp.get("learning_rate", 3e-4))
     train_freq = hp.get("train_freq", 1)
     if isinstance(train_freq, (list, tuple)):
         if len(train_freq) != 2 or train_freq[1] != "step":
             raise ValueError(f"train_freq must be a positive integer or [n, 'step'] (episodes are not implemented), "
                              f"got {train_freq!r}")
         train_freq = train_freq[0]
-    total = _pos_int("total_timesteps", hp.get("n_timesteps", 1_000_000) if total_timesteps is None
+    total = pos_int("total_timesteps", hp.get("n_timesteps", 1_000_000) if total_timesteps is None
                      else total_timesteps)
-    learning_starts = hp.get("learning_starts", 100)
-    if isinstance(learning_starts, bool) or not isinstance(learning_starts, (int, np.integer)) or learning_starts < 0:
-        raise ValueError(f"learning_starts must be a non-negative integer, got {learning_starts!r}")
+    learning_starts = non_negative_int("learning_starts", hp.get("learning_starts", 100))
     tau = hp.get("tau", 0.005)
     if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not 0 < tau <= 1:
         raise ValueError(f"tau must be a number in (0, 1], got {tau!r}")
-    if dtype not in ("float32", "float64"):
-        raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
-    env_kwargs = dict(hp.get("env_kwargs") or {})
-    for k in ("normalized_actions", "dtype"):
-        if k in env_kwargs:
-            raise ValueError(f"env_kwargs may not set {k!r} (the trainer sets it: normalize_actions / dtype)")
-    fields = dict(total_timesteps=total, n_envs=_pos_int("n_envs", hp.get("n_envs", 1)),
-                  buffer_size=_pos_int("buffer_size", hp.get("buffer_size", 1_000_000)),
-                  learning_starts=int(learning_starts), batch_size=_pos_int("batch_size", hp.get("batch_size", 256)),
-                  train_freq=_pos_int("train_freq", train_freq),
-                  gradient_steps=_pos_int("gradient_steps", hp.get("gradient_steps", 1)), net_arch=net_arch,
+    float_dtype(dtype)
+    env_kwargs = train_env_kwargs(hp.get("env_kwargs"))
+    fields = dict(total_timesteps=total, n_envs=pos_int("n_envs", hp.get("n_envs", 1)),
+                  buffer_size=pos_int("buffer_size", hp.get("buffer_size", 1_000_000)),
+                  learning_starts=learning_starts, batch_size=pos_int("batch_size", hp.get("batch_size", 256)),
+                  train_freq=pos_int("train_freq", train_freq),
+                  gradient_steps=pos_int("gradient_steps", hp.get("gradient_steps", 1)), net_arch=net_arch,
                   activation=activation, lr_linear=lr_linear, norm_obs=bool(norm.get("norm_obs", True)),
                   norm_reward=bool(norm.get("norm_reward", True)),
                   normalize_actions=bool(hp.get("normalize_actions", False)), env_kwargs=env_kwargs, dtype=dtype)

@@ -36,9 +36,9 @@ import jax
 import jax.numpy as jnp
 
 from .policy import ACTIVATIONS
-from .ppo import _pos_int
 from .sac import (_ADAM, SACConfig, _adam_step, _critic_params, init_params, make_env, offpolicy_fields,
                   offpolicy_train, polyak, q_values)
+from .validate import number, pos_int
 
 __all__ = ["TD3Config", "HPARAMS", "RECIPE_KEYS", "td3_config", "make_env", "make_train", "init_td3",
            "actor_action", "critic_loss", "actor_loss", "update_step", "TD3Hooks"]
@@ -63,12 +63,6 @@ class TD3Config(SACConfig):
     TRAINER: ClassVar[str] = "agents.training.jax.td3"
 
 
-def _number(name: str, value, low: float = 0.0) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= low:
-        raise ValueError(f"{name} must be a number >= {low:g}, got {value!r}")
-    return float(value)
-
-
 def td3_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, total_timesteps: int | None = None,
                dtype: str = "float32") -> tuple[TD3Config, dict]:
     """``(config, hparams)`` of a recipe's hyperparameters (SB3/rl-zoo3 names, defaults SBX's TD3).
@@ -87,11 +81,11 @@ def td3_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
     noise_type = hp.get("noise_type")
     if noise_type not in (None, "normal"):
         raise ValueError(f"noise_type {noise_type!r} is not implemented by the JAX TD3 trainer (normal only)")
-    noise_std = _number("noise_std", hp.get("noise_std", 0.1)) if noise_type else 0.0
+    noise_std = number("noise_std", hp.get("noise_std", 0.1)) if noise_type else 0.0
     cfg = TD3Config(env_id=env_id, ent_auto=False, use_sde=False,
-                    policy_delay=_pos_int("policy_delay", hp.get("policy_delay", 2)), **fields)
-    hparams.update(target_policy_noise=_number("target_policy_noise", hp.get("target_policy_noise", 0.2)),
-                   target_noise_clip=_number("target_noise_clip", hp.get("target_noise_clip", 0.5)),
+                    policy_delay=pos_int("policy_delay", hp.get("policy_delay", 2)), **fields)
+    hparams.update(target_policy_noise=number("target_policy_noise", hp.get("target_policy_noise", 0.2)),
+                   target_noise_clip=number("target_noise_clip", hp.get("target_noise_clip", 0.5)),
                    noise_std=noise_std)
     return cfg, hparams
 
