@@ -18,6 +18,7 @@ pytest.importorskip("optax")
 from agents.benchmark.driver import run_benchmark  # noqa: E402
 from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS, TRAINERS, default_agents, plan_runs  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
+from jax_run_records import CONFIG_KEYS, MARL_CONFIG_KEYS, VMAPPED_KEY  # noqa: E402
 
 TINY = BUDGETS["tiny"]
 JAX_AGENTS = ("ppo_jax", "ppo_ma_jax")
@@ -108,6 +109,7 @@ def test_run_directories_of_vmapped_seeds(first):
             res = json.load(open(os.path.join(d, "result.json")))
             assert cfg["trainer"] == "jax" and cfg["status"] == "complete" and cfg["seed"] == s == res["seed"]
             assert cfg["multi_agent"] == AGENTS[k].multi_agent
+            assert set(cfg) == (MARL_CONFIG_KEYS if cfg["multi_agent"] else CONFIG_KEYS) | {VMAPPED_KEY}
             assert cfg["vmapped"]["seeds"] == list(range(n)) and cfg["vmapped"]["runs"] == n
             for t in ("compile_seconds", "train_seconds", "train_cpu_seconds"):
                 assert cfg[t] == pytest.approx(cfg["vmapped"][t] / n, rel=1e-12)

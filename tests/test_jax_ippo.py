@@ -21,6 +21,7 @@ from agents.training.jax.ippo import (agent_actions, ippo_config, jax_act_shared
 from agents.training.jax.ppo import HPARAMS  # noqa: E402
 from agents.training.recipes import resolve_recipe  # noqa: E402
 from agents.vecenv.slots import SlotEncoder  # noqa: E402
+from jax_run_records import MARL_CONFIG_KEYS  # noqa: E402
 
 #: the shipped multi-agent tracking recipe at a tiny size: 2 updates of 2 copies x 5 agents x 16 steps, net [8, 8]
 TINY = {"n_envs": 2, "n_steps": 16, "batch_size": 32, "n_epochs": 2,
@@ -229,6 +230,7 @@ def test_cli_run_is_scored_by_evaluate_on_the_pettingzoo_env(tmp_path, capsys):
     assert sorted(os.listdir(out)) == ["config.json", "curve.json", "policy.json", "policy.npz", "train_curve.json"]
     cfg = json.load(open(os.path.join(out, "config.json")))
     assert cfg["trainer"] == "jax" and cfg["multi_agent"] is True and cfg["status"] == "complete"
+    assert set(cfg) == MARL_CONFIG_KEYS
     assert cfg["n_agents"] == 5 and cfg["agent_id"] is True and cfg["normalize_actions"] is True
     assert cfg["timesteps_done"] == 512 and cfg["n_updates"] == 2 and cfg["samples_per_update"] == 5 * 256
     assert cfg["hyperparams"] == json.loads(json.dumps(

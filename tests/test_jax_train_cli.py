@@ -15,6 +15,7 @@ jax = pytest.importorskip("jax")
 pytest.importorskip("optax")
 
 from dobs_envs.cli import main  # noqa: E402
+from jax_run_records import CONFIG_KEYS  # noqa: E402
 
 #: a smaller rollout than the jitted trainer's tracking recipe (tracking-jax: 64 x 128; SB3's 8 x 512): 8 x 128 with
 #: minibatches of 256 (2 updates within --timesteps 2048: a curve of 3 points)
@@ -49,7 +50,7 @@ def test_run_directory_records(jax_run):
     assert cfg["library_version"] == metadata.version("dobs-envs")
     assert cfg["env"] == "tracking" and cfg["env_id"] == "dobs_envs/Tracking-v0" and cfg["seed"] == 3
     assert cfg["timesteps"] == 2048 and cfg["timesteps_done"] == 2048 and cfg["n_updates"] == 2
-    assert cfg["status"] == "complete"
+    assert cfg["status"] == "complete" and set(cfg) == CONFIG_KEYS
     # the recipe: SB3 PPO's (agents/config/hyperparams/ppo.yaml) with the --hyperparams overrides
     recipe = resolve_recipe("ppo", "tracking", overrides=HP, trainer="jax")  # the jitted trainer's recipe
     assert cfg["hyperparams"] == json.loads(json.dumps(recipe.hyperparams))

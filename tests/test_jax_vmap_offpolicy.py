@@ -27,6 +27,7 @@ pytest.importorskip("optax")
 from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS, plan_runs  # noqa: E402
 from agents.training.jax.vmap_seeds import BUILDERS, SHARED_TIMES  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
+from jax_run_records import CONFIG_KEYS, VMAPPED_KEY  # noqa: E402
 
 TINY = BUDGETS["tiny"]
 #: config.json fields that differ between two runs of one recipe: the times (and, vmapped, the shared figures)
@@ -43,8 +44,8 @@ def _same_run(vmapped: str, single: str) -> None:
     files = sorted(f for f in os.listdir(single) if not f.startswith("."))
     assert files == FILES and set(FILES) <= set(os.listdir(vmapped))
     cv, cs = (json.load(open(os.path.join(d, "config.json"))) for d in (vmapped, single))
-    shared = cv.pop("vmapped")
-    assert set(cv) == set(cs)  # the same fields (the vmapped run adds only "vmapped")
+    shared = cv.pop(VMAPPED_KEY)
+    assert set(cv) == set(cs) == CONFIG_KEYS  # the same fields (the vmapped run adds only "vmapped")
     assert {k: v for k, v in cv.items() if k not in TIMES} == {k: v for k, v in cs.items() if k not in TIMES}
     assert shared["runs"] == len(shared["seeds"]) >= 2 and cv["seed"] in shared["seeds"]
     for t in SHARED_TIMES:

@@ -26,11 +26,13 @@ CPU times are this process's (``time.process_time``), wall times ``time.perf_cou
 """
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import sys
 import time
 from importlib import metadata
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -39,7 +41,8 @@ from ..seeds import TUNING
 from ..train import TrainResult, xla_threads
 from . import ALGOS, LIBRARY, TRAINER
 
-__all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
+__all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "run_config", "finish_config", "build_run",
+           "RunSetup", "curve_episodes", "TIME_FIELDS", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
 
 #: learning-curve episodes use seeds ``CURVE_SEED + k`` (the tuning range, as the benchmark's curves)
 CURVE_SEED = TUNING.start
@@ -83,6 +86,18 @@ def curve_updates(n_updates: int, points: int = CURVE_POINTS) -> list[int]:
     return sorted({0, *(int(round(n_updates * (i + 1) / k)) for i in range(k))})
 
 
+def curve_episodes(curve_points, curve_seeds) -> list[int]:
+    """The learning curve's episodes (``curve_seeds``; default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``),
+    checked to lie in the tuning range, and ``curve_points`` checked to be a positive integer (:class:`JaxRunError`
+    naming the argument)."""
+    seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
+    if not seeds or not all(s in TUNING for s in seeds):
+        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {seeds}")
+    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
+        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
+    return seeds
+
+
 def _plain(x):
     """JSON-able lists of an array (NaN -> None)."""
     return [None if isinstance(v, float) and math.isnan(v) else v for v in np.asarray(x).tolist()]
@@ -91,10 +106,71 @@ def _plain(x):
 #: per algorithm: (module, its recipe reader)
 _ALGO_MODULES = {"ppo": ("ppo", "ppo_config"), "sac": ("sac", "sac_config"), "td3": ("td3", "td3_config")}
 
+#: the times a finished run's config.json records (:func:`finish_config`)
+TIME_FIELDS = ("setup_seconds", "compile_seconds", "compile_cpu_seconds", "train_seconds", "train_cpu_seconds",
+               "curve_seconds", "total_seconds", "total_cpu_seconds")
+
 
 def _rollout(cfg) -> int:
     """Env steps per update: SAC's ``rollout`` (``n_envs train_freq``), PPO's ``n_envs n_steps``."""
     return int(getattr(cfg, "rollout", None) or cfg.n_envs * cfg.n_steps)
+
+
+def run_config(env: str, algo: str, fields: dict, *, seed: int, curve_seeds: list) -> dict:
+    """``config.json`` of a jitted run as it starts (``status`` running): the trainer and its versions, the run's
+    ``fields`` (its builder's: :func:`build_run`, :func:`.run_marl.build_marl_run`), the seed and its key, the
+    exported policy's file, the learning curve's episodes. The one place these fields are assembled (:func:`train_jax`,
+    :func:`.run_marl.train_jax_marl`, :func:`.vmap_seeds.train_jax_seeds`); :func:`finish_config` completes it."""
+    import jax
+
+    return {"env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
+            "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
+            **fields, "seed": int(seed), "key": f"jax.random.PRNGKey({int(seed)})", "timesteps_done": 0,
+            "policy": "policy.npz", "curve_seeds": [int(s) for s in curve_seeds], "status": RUNNING}
+
+
+def finish_config(config: dict, steps_done: int, times: dict) -> dict:
+    """``config`` (:func:`run_config`'s) of the finished run: ``status`` complete, the env steps taken and every
+    time of :data:`TIME_FIELDS` (``times`` must hold exactly those)."""
+    if set(times) != set(TIME_FIELDS):
+        raise ValueError(f"times must be {list(TIME_FIELDS)}, got {sorted(times)}")
+    config.update(status=COMPLETE, timesteps_done=int(steps_done), **{k: times[k] for k in TIME_FIELDS})
+    return config
+
+
+class RunSetup(NamedTuple):
+    """A centralised run built from its recipe, before compiling (:func:`build_run`): the algorithm's static config
+    and float hyperparameters, the JAX env and its params, the algorithm's ``make_train``, ``config.json``'s fields
+    of the run (:func:`run_config`'s ``fields``)."""
+    cfg: Any
+    hp: dict
+    env: Any
+    env_params: Any
+    make_train: Callable
+    fields: dict
+
+
+def build_run(algo: str, env: str, gid: str, hyperparams: dict | None, timesteps: int | None) -> RunSetup:
+    """The centralised ``algo`` run of ``env`` (Gymnasium id ``gid``) from its recipe
+    (:func:`agents.training.recipes.resolve_recipe` with the overrides ``hyperparams``; ``timesteps`` default the
+    recipe's ``n_timesteps``): what :func:`train_jax` and :mod:`.vmap_seeds`' builder compile. A recipe the trainer
+    cannot run: :class:`JaxRunError` naming it."""
+    from ..recipes import resolve_recipe
+
+    module_name, config_name = _ALGO_MODULES[algo]
+    module = importlib.import_module(f"{__package__}.{module_name}")
+    recipe = resolve_recipe(algo, env, overrides=hyperparams, trainer=TRAINER)
+    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
+    try:
+        cfg, hp = getattr(module, config_name)(recipe.hyperparams, gid, total_timesteps=timesteps)
+        env_jax, env_params = module.make_env(cfg)
+    except ValueError as exc:
+        raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
+    fields = {"env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "timesteps": timesteps,
+              "n_updates": cfg.n_updates, "rollout": _rollout(cfg), "n_agents": 1,
+              "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
+              "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams)}
+    return RunSetup(cfg, hp, env_jax, env_params, module.make_train, fields)
 
 
 def _curve(snapshots: dict, updates: list, rollout: int, cfg, hp, env, env_params, env_name: str,
@@ -150,26 +226,15 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     """
     if algo not in ALGOS:
         raise JaxRunError(f"--algo {algo}: the jitted trainer implements {', '.join(ALGOS)}")
-    seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
-    if not seeds or not all(s in TUNING for s in seeds):
-        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {seeds}")
-    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
-        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
+    seeds = curve_episodes(curve_points, curve_seeds)
     env, gid = jax_env(env)
     xla_threads(threads)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
-    import importlib
-
     import jax
 
     from dobs_envs.registry import ENVIRONMENTS
 
-    from ..recipes import resolve_recipe
     from .export import save_policy
-
-    module_name, config_name = _ALGO_MODULES[algo]
-    module = importlib.import_module(f"{__package__}.{module_name}")
-    make_env, make_train, read_config = module.make_env, module.make_train, getattr(module, config_name)
 
     def say(msg: str) -> None:
         if progress:
@@ -179,28 +244,13 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
         # (docs/jax.md); the run still simulates and trains in float32 (the config's dtype)
         jax.config.update("jax_enable_x64", True)
-    recipe = resolve_recipe(algo, env, overrides=hyperparams, trainer=TRAINER)
-    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
-    try:
-        cfg, hp = read_config(recipe.hyperparams, gid, total_timesteps=timesteps)
-        env_jax, env_params = make_env(cfg)
-    except ValueError as exc:
-        raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
+    run = build_run(algo, env, gid, hyperparams, timesteps)
+    cfg, hp, env_jax, env_params = run.cfg, run.hp, run.env, run.env_params
     updates = curve_updates(cfg.n_updates, curve_points)
-    train = jax.jit(make_train(cfg, env_jax, env_params, snapshots=updates))
+    train = jax.jit(run.make_train(cfg, env_jax, env_params, snapshots=updates))
     key = jax.random.PRNGKey(seed)
     setup = time.perf_counter() - t_wall
-    config = {
-        "env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
-        "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
-        "env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "seed": int(seed),
-        "key": f"jax.random.PRNGKey({int(seed)})", "timesteps": timesteps, "timesteps_done": 0,
-        "n_updates": cfg.n_updates, "rollout": _rollout(cfg), "n_agents": 1,
-        "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
-        "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams),
-        "policy": "policy.npz", "curve_seeds": seeds,
-        "status": RUNNING,
-    }
+    config = run_config(env, algo, run.fields, seed=seed, curve_seeds=seeds)
     os.makedirs(out, exist_ok=True)
     clear_run(out)
     write_json_atomic(os.path.join(out, "config.json"), config)
@@ -216,16 +266,16 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     say(f"trained in {train_s:.1f} s; learning curve: {len(updates)} points x {len(seeds)} episodes ...")
 
     save_policy(out, result, cfg, hp, env_jax, env_params, overwrite=True,
-                extra={"seed": int(seed), "timesteps": timesteps, "timesteps_done": cfg.steps_done})
+                extra={"seed": int(seed), "timesteps": run.fields["timesteps"], "timesteps_done": cfg.steps_done})
     w0 = time.perf_counter()
     curve = _curve(result["snapshots"], updates, _rollout(cfg), cfg, hp, env_jax, env_params, env, seeds)
     write_json_atomic(os.path.join(out, "curve.json"), curve)
     c = result["curve"]
     write_json_atomic(os.path.join(out, "train_curve.json"), {k: _plain(v) for k, v in c.items()})
     curve_s = time.perf_counter() - w0
-    config.update(status=COMPLETE, timesteps_done=cfg.steps_done, setup_seconds=setup, compile_seconds=compile_s,
-                  compile_cpu_seconds=compile_cpu, train_seconds=train_s, train_cpu_seconds=train_cpu,
-                  curve_seconds=curve_s, total_seconds=time.perf_counter() - t_wall,
-                  total_cpu_seconds=time.process_time() - t_cpu)
+    finish_config(config, cfg.steps_done, {
+        "setup_seconds": setup, "compile_seconds": compile_s, "compile_cpu_seconds": compile_cpu,
+        "train_seconds": train_s, "train_cpu_seconds": train_cpu, "curve_seconds": curve_s,
+        "total_seconds": time.perf_counter() - t_wall, "total_cpu_seconds": time.process_time() - t_cpu})
     write_json_atomic(os.path.join(out, "config.json"), config)
     return TrainResult(path=out, model=None, seconds=train_s, config=config)

@@ -21,17 +21,17 @@ from __future__ import annotations
 import os
 import sys
 import time
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
-from ..seeds import TUNING
+from ..runs import clear_run, write_json_atomic
 from ..train import TrainResult, xla_threads
-from . import LIBRARY, TRAINER
-from .run import CURVE_EPISODES, CURVE_POINTS, CURVE_SEED, JaxRunError, _plain, _version, curve_updates, jax_env
+from . import TRAINER
+from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, finish_config, jax_env,
+                  run_config)
 
-__all__ = ["train_jax_marl", "shared_export", "MARL_ALGOS"]
+__all__ = ["train_jax_marl", "shared_export", "build_marl_run", "MarlSetup", "MARL_ALGOS"]
 
 #: the algorithms the jitted shared-policy trainer implements
 MARL_ALGOS = ("ppo",)
@@ -62,6 +62,43 @@ def shared_export(cfg, layout) -> tuple:
     extra = {"multi_agent": {"agents": list(layout.agents), "agent_id": bool(layout.agent_id),
                              "rescale_actions": bool(layout.rescale)}}
     return replace(cfg.ppo, normalize_actions=False), _PolicySpace(layout.low, layout.high), extra
+
+
+class MarlSetup(NamedTuple):
+    """A shared-policy run built from its recipe, before compiling (:func:`build_marl_run`): the
+    :class:`.ippo.IPPOConfig` and float hyperparameters, the multi-agent JAX env, its slot layout, ``config.json``'s
+    fields of the run (:func:`.run.run_config`'s ``fields``)."""
+    cfg: Any
+    hp: dict
+    env: Any
+    layout: Any
+    fields: dict
+
+
+def build_marl_run(algo: str, env: str, gid: str, hyperparams: dict | None, timesteps: int | None) -> MarlSetup:
+    """The shared-policy ``algo`` run of ``env`` from the recipe of ``train --multi-agent`` (overrides
+    ``hyperparams``; ``timesteps`` default the recipe's ``n_timesteps``): what :func:`train_jax_marl` and
+    :mod:`.vmap_seeds`' builder compile. A recipe the trainer cannot run: :class:`.run.JaxRunError` naming it."""
+    from ..recipes import resolve_recipe
+    from .ippo import ippo_config, make_marl_env, slot_layout
+
+    recipe = resolve_recipe(algo, env, multi_agent=True, overrides=hyperparams, trainer=TRAINER)
+    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
+    try:
+        cfg, hp = ippo_config(recipe.hyperparams, env, total_timesteps=timesteps)
+        env_jax = make_marl_env(cfg)
+        layout = slot_layout(env_jax, cfg)
+    except ValueError as exc:
+        raise JaxRunError(f"the multi-agent {algo} recipe of {env} (with its overrides) for the jitted trainer: "
+                          f"{exc}") from None
+    p = cfg.ppo
+    K, rollout = layout.n_agents, p.n_envs * p.n_steps
+    fields = {"env_id": gid, "marl_env": cfg.env_name, "dtype": p.dtype, "multi_agent": True, "hybrid": None,
+              "timesteps": timesteps, "n_updates": p.n_updates, "rollout": rollout, "samples_per_update": rollout * K,
+              "n_agents": K, "agent_id": layout.agent_id, "normalize_actions": p.normalize_actions, "env_kwargs": {},
+              "train_env_kwargs": dict(p.env_kwargs), "normalize": p.norm_obs or p.norm_reward,
+              "hyperparams": dict(recipe.hyperparams)}
+    return MarlSetup(cfg, hp, env_jax, layout, fields)
 
 
 def _marl_curve(snapshots: dict, updates: list, rollout: int, cfg, hp, layout, env_name: str, seeds: list) -> dict:
@@ -103,11 +140,7 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
     rounded up to whole rollouts of ``n_envs * n_steps`` env steps (``n_envs * K * n_steps`` samples)."""
     if algo not in MARL_ALGOS:
         raise JaxRunError(f"--algo {algo}: the jitted shared-policy trainer implements {', '.join(MARL_ALGOS)}")
-    seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None else curve_seeds)]
-    if not seeds or not all(s in TUNING for s in seeds):
-        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {seeds}")
-    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
-        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
+    seeds = curve_episodes(curve_points, curve_seeds)
     env, gid = jax_env(env)
     xla_threads(threads)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
@@ -115,9 +148,8 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
 
     from dobs_envs.registry import ENVIRONMENTS
 
-    from ..recipes import resolve_recipe
     from .export import save_policy
-    from .ippo import ippo_config, make_marl_env, make_train, slot_layout
+    from .ippo import make_train
 
     def say(msg: str) -> None:
         if progress:
@@ -125,31 +157,15 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
 
     if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as .run.train_jax)
-    recipe = resolve_recipe(algo, env, multi_agent=True, overrides=hyperparams, trainer=TRAINER)
-    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
-    try:
-        cfg, hp = ippo_config(recipe.hyperparams, env, total_timesteps=timesteps)
-        env_jax = make_marl_env(cfg)
-        layout = slot_layout(env_jax, cfg)
-    except ValueError as exc:
-        raise JaxRunError(f"the multi-agent {algo} recipe of {env} (with its overrides) for the jitted trainer: "
-                          f"{exc}") from None
+    run = build_marl_run(algo, env, gid, hyperparams, timesteps)
+    cfg, hp, layout = run.cfg, run.hp, run.layout
     p = cfg.ppo
-    K, rollout = layout.n_agents, p.n_envs * p.n_steps
+    K, rollout = layout.n_agents, run.fields["rollout"]
     updates = curve_updates(p.n_updates, curve_points)
-    train = jax.jit(make_train(cfg, env_jax, snapshots=updates))
+    train = jax.jit(make_train(cfg, run.env, snapshots=updates))
     key = jax.random.PRNGKey(seed)
     setup = time.perf_counter() - t_wall
-    config = {
-        "env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
-        "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
-        "env_id": gid, "marl_env": cfg.env_name, "dtype": p.dtype, "multi_agent": True, "hybrid": None,
-        "seed": int(seed), "key": f"jax.random.PRNGKey({int(seed)})", "timesteps": timesteps, "timesteps_done": 0,
-        "n_updates": p.n_updates, "rollout": rollout, "samples_per_update": rollout * K, "n_agents": K,
-        "agent_id": layout.agent_id, "normalize_actions": p.normalize_actions, "env_kwargs": {},
-        "train_env_kwargs": dict(p.env_kwargs), "normalize": p.norm_obs or p.norm_reward,
-        "hyperparams": dict(recipe.hyperparams), "policy": "policy.npz", "curve_seeds": seeds, "status": RUNNING,
-    }
+    config = run_config(env, algo, run.fields, seed=seed, curve_seeds=seeds)
     os.makedirs(out, exist_ok=True)
     clear_run(out)
     write_json_atomic(os.path.join(out, "config.json"), config)
@@ -166,15 +182,16 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
 
     cfg_p, space, extra = shared_export(cfg, layout)
     save_policy(out, result, cfg_p, hp, space, None, overwrite=True,
-                extra={**extra, "seed": int(seed), "timesteps": timesteps, "timesteps_done": p.steps_done})
+                extra={**extra, "seed": int(seed), "timesteps": run.fields["timesteps"],
+                       "timesteps_done": p.steps_done})
     w0 = time.perf_counter()
     curve = _marl_curve(result["snapshots"], updates, rollout, cfg, hp, layout, env, seeds)
     write_json_atomic(os.path.join(out, "curve.json"), curve)
     write_json_atomic(os.path.join(out, "train_curve.json"), {k: _plain(v) for k, v in result["curve"].items()})
     curve_s = time.perf_counter() - w0
-    config.update(status=COMPLETE, timesteps_done=p.steps_done, setup_seconds=setup, compile_seconds=compile_s,
-                  compile_cpu_seconds=compile_cpu, train_seconds=train_s, train_cpu_seconds=train_cpu,
-                  curve_seconds=curve_s, total_seconds=time.perf_counter() - t_wall,
-                  total_cpu_seconds=time.process_time() - t_cpu)
+    finish_config(config, p.steps_done, {
+        "setup_seconds": setup, "compile_seconds": compile_s, "compile_cpu_seconds": compile_cpu,
+        "train_seconds": train_s, "train_cpu_seconds": train_cpu, "curve_seconds": curve_s,
+        "total_seconds": time.perf_counter() - t_wall, "total_cpu_seconds": time.process_time() - t_cpu})
     write_json_atomic(os.path.join(out, "config.json"), config)
     return TrainResult(path=out, model=None, seconds=train_s, config=config)

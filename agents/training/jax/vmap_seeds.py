@@ -40,11 +40,11 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
-from ..seeds import TUNING
+from ..runs import clear_run, write_json_atomic
 from ..train import TrainResult, xla_threads
-from . import ALGOS, LIBRARY, TRAINER
-from .run import CURVE_EPISODES, CURVE_POINTS, CURVE_SEED, JaxRunError, _plain, _version, curve_updates, jax_env
+from . import ALGOS
+from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, finish_config, jax_env,
+                  run_config)
 
 __all__ = ["train_jax_seeds", "VmapRun", "BUILDERS", "SHARED_TIMES"]
 
@@ -54,10 +54,10 @@ SHARED_TIMES = ("setup_seconds", "compile_seconds", "compile_cpu_seconds", "trai
 
 class VmapRun(NamedTuple):
     """One algorithm's run built from its recipe, before compiling: ``train(key, hparams)`` (snapshots after the
-    ``updates`` of the learning curve), its float hyperparameters ``hp``, the algorithm's ``config.json`` fields
-    (``timesteps``, ``n_updates``, ``hyperparams``, ...), ``steps_done`` (env steps a run takes), ``export(out, result,
-    extra)`` (the run's ``policy.npz`` + ``policy.json``), ``curve(result) -> curve.json's document``, ``describe``
-    (a progress line)."""
+    ``updates`` of the learning curve), its float hyperparameters ``hp``, the run's ``config.json`` fields
+    (``timesteps``, ``n_updates``, ``hyperparams``, ...: :func:`.run.run_config`'s ``fields``), ``steps_done`` (env
+    steps a run takes), ``export(out, result, extra)`` (the run's ``policy.npz`` + ``policy.json``), ``curve(result)
+    -> curve.json's document``, ``describe`` (a progress line)."""
     train: Callable
     hp: dict
     updates: list
@@ -70,29 +70,15 @@ class VmapRun(NamedTuple):
 
 def _centralised(algo: str, env: str, gid: str, hyperparams: dict | None, timesteps: int | None, curve_points: int,
                  seeds: list) -> VmapRun:
-    """Centralised PPO, SAC or TD3: :func:`.run.train_jax`'s run (its recipe reader, env, ``make_train``, export and
-    learning curve; ``algo``: ``"ppo"``, ``"sac"`` or ``"td3"``)."""
-    import importlib
-
-    from ..recipes import resolve_recipe
+    """Centralised PPO, SAC or TD3: :func:`.run.train_jax`'s run (:func:`.run.build_run`; its export and learning
+    curve)."""
     from .export import save_policy
-    from .run import _ALGO_MODULES, _curve, _rollout
+    from .run import _curve, _rollout, build_run
 
-    module_name, config_name = _ALGO_MODULES[algo]
-    module = importlib.import_module(f"{__package__}.{module_name}")
-    recipe = resolve_recipe(algo, env, overrides=hyperparams, trainer=TRAINER)
-    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
-    try:
-        cfg, hp = getattr(module, config_name)(recipe.hyperparams, gid, total_timesteps=timesteps)
-        env_jax, env_params = module.make_env(cfg)
-    except ValueError as exc:
-        raise JaxRunError(f"the {algo} recipe of {env} (with its overrides) for the jitted trainer: {exc}") from None
+    run = build_run(algo, env, gid, hyperparams, timesteps)
+    cfg, hp, env_jax, env_params = run.cfg, run.hp, run.env, run.env_params
     updates = curve_updates(cfg.n_updates, curve_points)
     rollout = _rollout(cfg)
-    config = {"env_id": gid, "dtype": cfg.dtype, "multi_agent": False, "hybrid": None, "timesteps": timesteps,
-              "n_updates": cfg.n_updates, "rollout": rollout, "n_agents": 1,
-              "normalize_actions": cfg.normalize_actions, "env_kwargs": {}, "train_env_kwargs": dict(cfg.env_kwargs),
-              "normalize": cfg.norm_obs or cfg.norm_reward, "hyperparams": dict(recipe.hyperparams)}
 
     def export(out, result, extra):
         save_policy(out, result, cfg, hp, env_jax, env_params, overwrite=True, extra=extra)
@@ -100,35 +86,23 @@ def _centralised(algo: str, env: str, gid: str, hyperparams: dict | None, timest
     def curve(result):
         return _curve(result["snapshots"], updates, rollout, cfg, hp, env_jax, env_params, env, seeds)
 
-    return VmapRun(module.make_train(cfg, env_jax, env_params, snapshots=updates), hp, updates, config,
+    return VmapRun(run.make_train(cfg, env_jax, env_params, snapshots=updates), hp, updates, run.fields,
                    cfg.steps_done, export, curve, f"{cfg.n_updates} updates of {rollout} env steps")
 
 
 def _ppo_shared(env: str, gid: str, hyperparams: dict | None, timesteps: int | None, curve_points: int,
                 seeds: list) -> VmapRun:
-    """PPO with one policy shared by the controller nodes: :func:`.run_marl.train_jax_marl`'s run."""
-    from ..recipes import resolve_recipe
+    """PPO with one policy shared by the controller nodes: :func:`.run_marl.train_jax_marl`'s run
+    (:func:`.run_marl.build_marl_run`; its export and learning curve)."""
     from .export import save_policy
-    from .ippo import ippo_config, make_marl_env, make_train, slot_layout
-    from .run_marl import _marl_curve, shared_export
+    from .ippo import make_train
+    from .run_marl import _marl_curve, build_marl_run, shared_export
 
-    recipe = resolve_recipe("ppo", env, multi_agent=True, overrides=hyperparams, trainer=TRAINER)
-    timesteps = int(recipe.n_timesteps if timesteps is None else timesteps)
-    try:
-        cfg, hp = ippo_config(recipe.hyperparams, env, total_timesteps=timesteps)
-        env_jax = make_marl_env(cfg)
-        layout = slot_layout(env_jax, cfg)
-    except ValueError as exc:
-        raise JaxRunError(f"the multi-agent ppo recipe of {env} (with its overrides) for the jitted trainer: "
-                          f"{exc}") from None
+    run = build_marl_run("ppo", env, gid, hyperparams, timesteps)
+    cfg, hp, layout = run.cfg, run.hp, run.layout
     p = cfg.ppo
-    K, rollout = layout.n_agents, p.n_envs * p.n_steps
+    K, rollout = layout.n_agents, run.fields["rollout"]
     updates = curve_updates(p.n_updates, curve_points)
-    config = {"env_id": gid, "marl_env": cfg.env_name, "dtype": p.dtype, "multi_agent": True, "hybrid": None,
-              "timesteps": timesteps, "n_updates": p.n_updates, "rollout": rollout, "samples_per_update": rollout * K,
-              "n_agents": K, "agent_id": layout.agent_id, "normalize_actions": p.normalize_actions, "env_kwargs": {},
-              "train_env_kwargs": dict(p.env_kwargs), "normalize": p.norm_obs or p.norm_reward,
-              "hyperparams": dict(recipe.hyperparams)}
     cfg_p, space, shared = shared_export(cfg, layout)
 
     def export(out, result, extra):
@@ -137,7 +111,7 @@ def _ppo_shared(env: str, gid: str, hyperparams: dict | None, timesteps: int | N
     def curve(result):
         return _marl_curve(result["snapshots"], updates, rollout, cfg, hp, layout, env, seeds)
 
-    return VmapRun(make_train(cfg, env_jax, snapshots=updates), hp, updates, config, p.steps_done, export, curve,
+    return VmapRun(make_train(cfg, run.env, snapshots=updates), hp, updates, run.fields, p.steps_done, export, curve,
                    f"{p.n_updates} updates of {p.n_envs} copies x {K} agents x {p.n_steps} steps")
 
 
@@ -180,12 +154,7 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
         return [one(env, algo, timesteps=timesteps, seed=s, out=out, hyperparams=hyperparams, threads=threads,
                     progress=progress, curve_points=curve_points, curve_seeds=curve_seeds)
                 for s, out in zip(seeds, outs)]
-    curve_seeds = [int(s) for s in (range(CURVE_SEED, CURVE_SEED + CURVE_EPISODES) if curve_seeds is None
-                                    else curve_seeds)]
-    if not curve_seeds or not all(s in TUNING for s in curve_seeds):
-        raise JaxRunError(f"curve_seeds must be seeds of the {TUNING}, got {curve_seeds}")
-    if isinstance(curve_points, bool) or not isinstance(curve_points, int) or curve_points < 1:
-        raise JaxRunError(f"curve_points must be a positive integer, got {curve_points!r}")
+    curve_seeds = curve_episodes(curve_points, curve_seeds)
     env, gid = jax_env(env)
     xla_threads(threads)
     t_wall = time.perf_counter()
@@ -207,12 +176,10 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     train = jax.jit(jax.vmap(run.train, in_axes=(0, None)))
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
     setup = time.perf_counter() - t_wall
-    base = {"env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
-            "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
-            **run.config, "timesteps_done": 0, "policy": "policy.npz", "curve_seeds": curve_seeds, "status": RUNNING}
     configs = []
     for s, out in zip(seeds, outs):
-        c = {**base, "seed": s, "key": f"jax.random.PRNGKey({s})", "vmapped": {"seeds": seeds, "runs": n}}
+        c = {**run_config(env, algo, run.config, seed=s, curve_seeds=curve_seeds),
+             "vmapped": {"seeds": seeds, "runs": n}}
         os.makedirs(out, exist_ok=True)
         clear_run(out)
         write_json_atomic(os.path.join(out, "config.json"), c)
@@ -239,11 +206,11 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
         write_json_atomic(os.path.join(out, "curve.json"), run.curve(result))
         write_json_atomic(os.path.join(out, "train_curve.json"), {k: _plain(v) for k, v in result["curve"].items()})
         curve_s = time.perf_counter() - w1
-        config.update(status=COMPLETE, timesteps_done=run.steps_done, **share, curve_seconds=curve_s,
-                      total_seconds=sum(share[k] for k in ("setup_seconds", "compile_seconds", "train_seconds"))
-                      + time.perf_counter() - w0,
-                      total_cpu_seconds=share["compile_cpu_seconds"] + share["train_cpu_seconds"]
-                      + time.process_time() - c0)
+        finish_config(config, run.steps_done, {
+            **share, "curve_seconds": curve_s,
+            "total_seconds": sum(share[k] for k in ("setup_seconds", "compile_seconds", "train_seconds"))
+            + time.perf_counter() - w0,
+            "total_cpu_seconds": share["compile_cpu_seconds"] + share["train_cpu_seconds"] + time.process_time() - c0})
         config["vmapped"].update(whole)
         write_json_atomic(os.path.join(out, "config.json"), config)
         out_results.append(TrainResult(path=out, model=None, seconds=share["train_seconds"], config=config))
