@@ -4,11 +4,13 @@ What the benchmark's jitted rows run (:func:`agents.training.jax.vmap_seeds.trai
 :data:`agents.training.jax.vmap_seeds.BUILDERS` builds from the shipped recipe (``resolve_recipe(algo, env,
 trainer="jax")``, the learning curve's snapshots included), compiled once as ``jax.jit(train)`` (one seed: what the
 benchmark runs for an algorithm without a vmapped builder, seed after seed) and once as ``jax.jit(jax.vmap(train))``
-over ``--seeds`` keys. Both in this process, one XLA thread, compiled first, then the two compiled runs alternately
-``--repeats`` times (the same inputs: a repeat recomputes the same run). Figures: CPU (``time.process_time``) and
-wall seconds of each compilation and run; the ratio of the target is the vmapped run's CPU per seed over the
-single run's CPU (below 1: vmapping is cheaper per run), with and without the compilations (a run of the
-benchmark pays one compilation per task: one vmapped, or one single run per seed).
+over ``--seeds`` keys. Both in this process, one XLA thread: the single program compiled and run, then the vmapped
+one, then the two alternately up to ``--repeats`` runs each (the same inputs: a repeat recomputes the same run).
+Figures: CPU (``time.process_time``) and wall seconds of each compilation and run; the ratio of the target is the
+vmapped run's CPU per seed over the single run's CPU (below 1: vmapping is cheaper per run), with and without the
+compilations (a run of the benchmark pays one compilation per task: one vmapped, or one single run per seed).
+Peak resident memory (``ru_maxrss``) after the single run and after the vmapped one (the replay buffers: ``--seeds``
+of them at once).
 
     PYTHONPATH=. python benchmarks/bench_vmap_seeds.py [--algo sac] [--env tracking] [--steps 20000] [--seeds 10]
         [--repeats 2] [--out x.json]
@@ -21,12 +23,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 
 
 def _load() -> list:
     return [round(x, 2) for x in os.getloadavg()]
+
+
+def _peak_mb() -> float:
+    """This process's peak resident memory so far (MB; Linux reports ``ru_maxrss`` in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _timed(fn):
@@ -74,23 +82,38 @@ def main(argv=None) -> int:
     keys = jnp.stack([jax.random.PRNGKey(s) for s in range(args.seeds)])
     single = jax.jit(run.train)
     vmapped = jax.jit(jax.vmap(run.train, in_axes=(0, None)))
-    one, record["compile_single_cpu"], record["compile_single_wall"] = _timed(
-        lambda: single.lower(key, run.hp).compile())
-    many, record["compile_vmapped_cpu"], record["compile_vmapped_wall"] = _timed(
-        lambda: vmapped.lower(keys, run.hp).compile())
-    print(f"{args.algo} {env}, {run.steps_done} env steps per run: compiled single in "
-          f"{record['compile_single_cpu']:.1f} s CPU, {args.seeds} seeds vmapped in "
-          f"{record['compile_vmapped_cpu']:.1f} s CPU", file=sys.stderr, flush=True)
     for name in ("single_cpu", "single_wall", "vmapped_cpu", "vmapped_wall"):
         record[name] = []
-    for r in range(args.repeats):
+
+    def run_single():
         _, c, w = _timed(lambda: jax.block_until_ready(one(key, run.hp)))
         record["single_cpu"].append(c)
         record["single_wall"].append(w)
+        return c
+
+    def run_vmapped():
         _, c, w = _timed(lambda: jax.block_until_ready(many(keys, run.hp)))
         record["vmapped_cpu"].append(c)
         record["vmapped_wall"].append(w)
-        print(f"repeat {r}: single {record['single_cpu'][-1]:.1f} s CPU, {args.seeds} vmapped {c:.1f} s CPU "
+        return c
+
+    # the single run's phases first (its peak memory before the vmapped program exists), then alternately
+    one, record["compile_single_cpu"], record["compile_single_wall"] = _timed(
+        lambda: single.lower(key, run.hp).compile())
+    run_single()
+    record["peak_mb_single"] = _peak_mb()
+    many, record["compile_vmapped_cpu"], record["compile_vmapped_wall"] = _timed(
+        lambda: vmapped.lower(keys, run.hp).compile())
+    run_vmapped()
+    record["peak_mb_with_vmapped"] = _peak_mb()
+    print(f"{args.algo} {env}, {run.steps_done} env steps per run: compiled single in "
+          f"{record['compile_single_cpu']:.1f} s CPU, {args.seeds} seeds vmapped in "
+          f"{record['compile_vmapped_cpu']:.1f} s CPU; peak memory {record['peak_mb_single']:.0f} MB after the "
+          f"single run, {record['peak_mb_with_vmapped']:.0f} MB after the vmapped one", file=sys.stderr, flush=True)
+    for r in range(args.repeats):
+        s_cpu = record["single_cpu"][-1] if r == 0 else run_single()
+        c = record["vmapped_cpu"][-1] if r == 0 else run_vmapped()
+        print(f"repeat {r}: single {s_cpu:.1f} s CPU, {args.seeds} vmapped {c:.1f} s CPU "
               f"({c / args.seeds:.2f} s per run)", file=sys.stderr, flush=True)
     record["load_after"] = _load()
     n = args.seeds

@@ -28,7 +28,9 @@ The vmapped algorithms: :data:`BUILDERS`, ``(algo, multi_agent) -> builder`` (a 
 Cost: on one XLA thread a vmapped run's compiled part takes about the CPU time of its seeds run one after another
 (SAC's shipped tracking recipe, 10 seeds x 20k env steps, benchmarks/bench_vmap_seeds.py: 0.99x per run, measured
 on a shared 2-core machine); what the seeds share is the compilation (28 s CPU for the 10 seeds against 19 s for
-each single run there).
+each single run there). Memory: the seeds' states are held at once, an off-policy run's replay buffer included (SAC's
+tracking recipe: 100k transitions, ~127 MB per seed; peak resident memory 2.9 GB for 10 seeds vmapped against 1.4 GB
+for one, same script).
 """
 from __future__ import annotations
 
