@@ -69,6 +69,16 @@ def test_plan_trainer_selects_the_default_rows_and_budgets_are_equal():
     assert AGENTS["ppo_jax"].information != AGENTS["ppo_ma_jax"].information
 
 
+@pytest.mark.parametrize("trainer", ["sb3", "jax", "all"])
+def test_named_agents_train_their_budgets_steps_whatever_the_trainer(trainer):
+    """An agent named in ``agents`` trains its budget's env steps whichever trainer selects the default rows: with
+    the default trainer (sb3) the jitted shared PPO once got the budget's longest (600k instead of its
+    counterpart's 300k), so the archive test planned its stored runs again."""
+    for budget, B in BUDGETS.items():
+        plan = plan_runs("tracking", budget, "x", agents=list(B["agents"]), trainer=trainer)
+        assert {sp["agent"]: sp["steps"] for sp in plan.specs} == B["agents"]
+
+
 def test_jitted_rows_count_each_seed_as_a_run(first):
     """The table has the two jitted rows (runs = the budget's seeds, IQM inside its run-level CI, the counterpart's
     env steps) next to every analytic row, and their statistics are agents.benchmark.stats' on the stored runs."""

@@ -35,6 +35,12 @@ ARCHIVES = {
     "tracking_full_jax_runs.tar.gz": ("tracking", "full", 10,
                                       {"tracking": ("docs/results/full_tracking_jax.md",
                                                     "## The jitted PPO (full budget, tracking)")}, ["ppo_jax"]),
+    # the jitted PPO (tuned section disturbance_rejection-jax) and the jitted shared PPO (SB3's shared recipe)
+    "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 20,
+                                                   {"disturbance_rejection": (
+                                                       "docs/results/full_disturbance_rejection.md",
+                                                       "## The jitted agents (full budget, disturbance_rejection)")},
+                                                   ["ppo_jax", "ppo_ma_jax"]),
     "tracking_full_runs.tar.gz": ("tracking", "full", 90,
                                   {"tracking": ("docs/results/full_tracking.md",
                                                 "## RL versus the paper's controller (full budget, tracking)")}, None),

@@ -308,7 +308,9 @@ def _plan(budget: str, agents: list[str] | None, timesteps: int | None, seeds: i
         if unknown:
             raise ValueError(f"unknown agents {unknown}; choose from {sorted(AGENTS)}"
                              + (f" or {sorted(variants)}" if variants else ""))
-        plan = {k: plan.get(k, default) for k in agents if k not in variants}
+        # the budget's steps of each agent named, whichever trainer's default set it belongs to (agents the
+        # budget does not list, e.g. sac_ma, train its longest)
+        plan = {k: B["agents"].get(k, default) for k in agents if k not in variants}
     for v in variants:  # equal budgets: a recipe-file agent trains as many steps as its base agent
         base = v[:-len(RECIPE_SUFFIX)]
         plan[v] = B["agents"].get(base, default)
