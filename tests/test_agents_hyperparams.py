@@ -197,8 +197,8 @@ def test_the_jitted_trainer_reads_its_own_sections_last():
     assert set(section) and {k for k in jx if jx[k] != sb3.get(k)} <= set(section)
     assert all(jx[k] == v for k, v in section.items())
     assert resolve_recipe("ppo", "tracking", trainer="jax").hyperparams == jx
-    assert "default-jax" not in table and "hetero_mas-jax" not in table
-    assert load_hyperparams("ppo", "hetero_mas", trainer="jax") == load_hyperparams("ppo", "hetero_mas")
+    assert "default-jax" not in table and "tracking_lossy-jax" not in table
+    assert load_hyperparams("ppo", "tracking_lossy", trainer="jax") == load_hyperparams("ppo", "tracking_lossy")
     assert "tracking-ma-jax" not in table
     assert load_hyperparams("ppo", "tracking", multi_agent=True, trainer="jax") == load_hyperparams(
         "ppo", "tracking", multi_agent=True)
