@@ -32,11 +32,11 @@ ARCHIVES = {
                                                     "## The tuned PPO recipe on hetero_mas (full budget)")}, ["ppo"]),
     # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
     # issue 40: the jitted PPO, 10 seeds vmapped in one call, with its own tracking recipe (tracking-jax)
-    # + the jitted SAC (SB3/SBX's tracking recipe), 10 seeds vmapped
-    "tracking_full_jax_runs.tar.gz": ("tracking", "full", 20,
+    # + the jitted shared PPO and the jitted SAC (SB3/SBX's tracking recipes), 10 seeds vmapped each
+    "tracking_full_jax_runs.tar.gz": ("tracking", "full", 30,
                                       {"tracking": ("docs/results/full_tracking_jax.md",
                                                     "## The jitted agents (full budget, tracking)")},
-                                      ["ppo_jax", "sac_jax"]),
+                                      ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
     # the jitted PPO (tuned section disturbance_rejection-jax) and the jitted shared PPO (SB3's shared recipe)
     "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 20,
                                                    {"disturbance_rejection": (
