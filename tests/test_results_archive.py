@@ -37,12 +37,12 @@ ARCHIVES = {
                                       {"tracking": ("docs/results/full_tracking_jax.md",
                                                     "## The jitted agents (full budget, tracking)")},
                                       ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
-    # the jitted PPO (tuned section disturbance_rejection-jax) and the jitted shared PPO (SB3's shared recipe)
-    "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 20,
+    # the jitted PPO (tuned section disturbance_rejection-jax), shared PPO and SAC (SB3's recipes)
+    "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 30,
                                                    {"disturbance_rejection": (
                                                        "docs/results/full_disturbance_rejection.md",
                                                        "## The jitted agents (full budget, disturbance_rejection)")},
-                                                   ["ppo_jax", "ppo_ma_jax"]),
+                                                   ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
     "random_network_full_jax_runs.tar.gz": ("random_network", "full", 20,
                                             {"random_network": ("docs/results/full_random_network.md",
                                                                 "## The jitted agents (full budget, random_network)")},
