@@ -129,7 +129,7 @@ def main(argv=None) -> int:
           f"  vmapped / alone, CPU per run: {record['ratio_run_cpu_per_run']:.3f} (run), "
           f"{record['ratio_with_compile_per_run']:.3f} (compile + run)")
     if args.out:
-        with open(args.out, "w") as fh:
+        with open(args.out, "x") as fh:
             json.dump(record, fh, indent=1)
     return 0
 
