@@ -782,16 +782,31 @@ def _scatter(ts, wk, ft, lo, nl, pa, ka, sc, fault, fsc):
 def advance_rows(pa, ka, lo, hi, fault):
     """One control period of copies ``lo .. hi-1`` of ``pa`` (:class:`PeriodArrays`) in place: tiles of
     :data:`TILE` copies, then a remainder of at least :data:`MIN_TILE` copies as one tile of exactly that
-    width (:func:`period_tile_any`), a smaller remainder copy by copy; the same per-copy arithmetic either
-    way. ``fault`` None, or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod`: the faulted period, then
-    each copy's next-period draws (:func:`~dobs_envs.sim.fault_kernel.draws_rows`). Threads may run
-    disjoint ranges concurrently (no GIL)."""
-    N, n, p = pa.z.shape[1], pa.z.shape[2], ka.C.shape[1]
+    width (:func:`period_tile_any`), both in :func:`_advance_tiles`; a smaller remainder copy by copy; the
+    same per-copy arithmetic either way. ``fault`` None, or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod`:
+    the faulted period, then each copy's next-period draws (:func:`~dobs_envs.sim.fault_kernel.draws_rows`).
+    Threads may run disjoint ranges concurrently (no GIL)."""
     sc = _scratch_copy(ka)
     if len(fault) == 0:
         fsc = None
     else:
-        fsc = fk.scratch_copy(fault.args, N)
+        fsc = fk.scratch_copy(fault.args, pa.z.shape[1])
+    b = lo
+    if hi - b >= MIN_TILE:
+        b = _advance_tiles(pa, ka, lo, hi, fault, sc, fsc)
+    for c in range(b, hi):
+        period_copy(c, pa, ka, sc, fault, fsc)
+    if len(fault) > 0:
+        fk.draws_rows(lo, hi, fault.args, fault.state)
+
+
+@_njit
+def _advance_tiles(pa, ka, lo, hi, fault, sc, fsc):
+    """The tiles of :func:`advance_rows` (copies ``lo ..``: whole tiles of :data:`TILE`, then a remainder of
+    at least :data:`MIN_TILE` copies as one tile); returns the first copy left for copy-by-copy steps. Its own
+    function: the tile work (:class:`TileState`, :class:`TileWork` and the fault tile) kept out of
+    :func:`advance_rows`'s frame made a step of one copy ~1.3 us faster (NE2, B = 1, 9.4 -> 8.1 us)."""
+    N, n, p = pa.z.shape[1], pa.z.shape[2], ka.C.shape[1]
     b = lo
     if hi - b >= TILE:
         ts, wk = _scratch_tile(ka, TILE)
@@ -819,10 +834,7 @@ def advance_rows(pa, ka, lo, hi, fault):
         period_tile_any(ts, ka, wk, nl, fault, ft, b)
         _scatter(ts, wk, ft, b, nl, pa, ka, sc, fault, fsc)
         b = hi
-    for c in range(b, hi):
-        period_copy(c, pa, ka, sc, fault, fsc)
-    if len(fault) > 0:
-        fk.draws_rows(lo, hi, fault.args, fault.state)
+    return b
 
 
 #: ``unpack_kernel_args(KF, KI)``: the :class:`~dobs_envs.sim.kernel_args.KernelArgs` packed in
