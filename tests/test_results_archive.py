@@ -26,7 +26,7 @@ ARCHIVES = {
     # issue 23: the faulted environment, the quick budget's agents
     "tracking_lossy_quick_runs.tar.gz": ("tracking_lossy", "quick", 12,
                                          {"tracking_lossy": ("docs/results/quick.md", "## tracking_lossy (quick budget)")}, None),
-    # issue 22: today's PPO recipe and dobs-envs tune's best recipe (RECIPES), 10 runs each
+    # issue 22: the shipped PPO recipe (dobs-envs tune's best since 2026-12-05) and the former one (RECIPES), 10 runs each
     "hetero_mas_tuned_runs.tar.gz": ("hetero_mas", "full", 20,
                                      {"hetero_mas": ("docs/results/tuned_ppo.md",
                                                     "## The tuned PPO recipe on hetero_mas (full budget)")}, ["ppo"]),
@@ -57,7 +57,7 @@ ARCHIVES = {
 }
 
 #: ``--recipe AGENT=FILE`` of an archive's command (paths relative to the repository)
-RECIPES = {"hetero_mas_tuned_runs.tar.gz": {"ppo": "results/hetero_mas_ppo_tuned.yml"}}
+RECIPES = {"hetero_mas_tuned_runs.tar.gz": {"ppo": "results/hetero_mas_ppo_untuned.yml"}}
 #: ``--agent-seeds AGENT=N`` of an archive's command
 AGENT_SEEDS = {"hetero_mas_full_runs.tar.gz": {"sac": 5, "td3": 5, "crossq": 5}}
 
