@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     if args.out and os.path.exists(args.out) and not args.overwrite:
         ap.error(f"--out {args.out} exists; pass --overwrite to replace it")
 
-    from agents.training.train import xla_threads
+    from agents.training.xla import xla_threads
 
     xla_threads(1)  # before JAX's first computation
     import jax

@@ -41,16 +41,9 @@ from .recipes import Recipe, recipe_from_hyperparams, resolve_recipe
 from .runs import (COMPLETE, INTERRUPTED, RUNNING, RunDirError, clear_run, default_run_dir, load_or_refuse,
                    read_run_config, resume_point, save_atomic, write_json_atomic)
 from .seeds import BC_DEMONSTRATION_OFFSET, resume_seed
+from .xla import XLA_ONE_THREAD, PJRT_THREADS, xla_threads  # noqa: F401 (the documented import path)
 
 __all__ = ["train", "resume", "TrainingInterrupted", "TrainResult", "TqdmCallback", "set_threads", "xla_threads"]
-
-
-#: XLA's CPU flag for one thread, kept for jaxlib versions that honour it (read when JAX creates its CPU
-#: client, i.e. at the first JAX computation); jaxlib 0.10 ignores it (its Eigen pool kept 2 threads)
-XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false",)
-#: environment variable that sizes the thread pool of the PJRT CPU client, on which XLA runs its
-#: intra-op work (read when JAX creates that client); "1": one thread
-PJRT_THREADS = "PJRT_NPROC"
 
 
 def set_threads(threads: int | None = 1) -> None:
@@ -69,18 +62,6 @@ def set_threads(threads: int | None = 1) -> None:
     if threads:
         torch.set_num_threads(int(threads))
     xla_threads(threads)
-
-
-def xla_threads(threads: int | None = 1) -> None:
-    """With ``threads=1``, XLA single-threaded (``PJRT_NPROC=1`` unless the user set it, and
-    :data:`XLA_ONE_THREAD` added to ``XLA_FLAGS``), the XLA part of :func:`set_threads` (the jitted trainer's,
-    :mod:`agents.training.jax.run`, which needs no torch); effective only before JAX's first computation."""
-    if threads == 1:
-        os.environ.setdefault(PJRT_THREADS, "1")
-        flags = os.environ.get("XLA_FLAGS", "")
-        missing = [f for f in XLA_ONE_THREAD if f.split("=")[0] not in flags]
-        if missing:
-            os.environ["XLA_FLAGS"] = " ".join([flags, *missing]).strip()
 
 
 class TqdmCallback:

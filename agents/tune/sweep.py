@@ -237,7 +237,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=1, help="XLA threads (1: one core, as the benchmark's runs; 0: "
                     "XLA's default pool)")
     args = ap.parse_args(argv)
-    from ..training.train import xla_threads
+    from ..training.xla import xla_threads
 
     xla_threads(args.threads if args.threads > 0 else None)
     structures = None

@@ -17,9 +17,16 @@
   sharing: :func:`~.ippo.make_train` over :mod:`.ppo`'s trainer, one slot per (copy, agent));
 - :mod:`.run_marl`: ``dobs-envs train --trainer jax --multi-agent`` (:func:`~.run_marl.train_jax_marl`).
 
-Importing this package imports nothing heavy; the names below load their module on first use.
+Importing this package imports nothing heavy; the names below load their module on first use. If JAX has not
+started yet, it adds ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA_FLAGS``
+(:func:`agents.training.xla.xla_safe_flags`: without it a vmapped trainer deadlocks in most runs on a
+multi-threaded XLA CPU client with jaxlib 0.10; the module :mod:`agents.training.xla` says how that was measured).
 """
 import importlib
+
+from ..xla import xla_safe_flags
+
+xla_safe_flags()
 
 #: ``config.json`` ``trainer`` of a jitted run (``dobs-envs train --trainer jax``; SB3 runs record none)
 TRAINER = "jax"

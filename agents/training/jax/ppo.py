@@ -52,6 +52,7 @@ import optax
 
 from . import normalize as nz
 from . import policy as pol
+from ..xla import check_xla_runtime
 from .validate import float_dtype, pos_int, schedule, train_env_kwargs, vec_normalize
 
 __all__ = ["PPOConfig", "HPARAMS", "ppo_config", "make_env", "make_train", "VecSlots", "gymnax_slots"]
@@ -258,6 +259,7 @@ def make_train(cfg: PPOConfig, env=None, env_params=None, snapshots=None, *, slo
         - ``snapshots`` (with ``snapshots``, K of them in increasing order): the actor's arrays ``pi_*``
           ``(K, ...)``, ``obs_mean (K, D)`` and ``obs_var (K, D)`` after those updates.
     """
+    check_xla_runtime("agents.training.jax.ppo.make_train")
     if slots is None:
         if env is None:
             env, env_params = make_env(cfg)

@@ -38,7 +38,8 @@ import numpy as np
 
 from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
 from ..seeds import TUNING
-from ..train import TrainResult, xla_threads
+from ..train import TrainResult
+from ..xla import xla_threads
 from . import ALGOS, LIBRARY, TRAINER
 
 __all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "run_config", "finish_config", "build_run",
@@ -212,7 +213,7 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
         as SB3).
     algo : ``"ppo"``, ``"sac"`` or ``"td3"`` (:data:`agents.training.jax.ALGOS`).
     hyperparams : overrides merged over the recipe (``agents/config/hyperparams/<algo>.yaml``).
-    threads : 1 (default): XLA on one thread (:func:`agents.training.train.xla_threads`).
+    threads : 1 (default): XLA on one thread (:func:`agents.training.xla.xla_threads`).
     progress : one line on stderr per phase (compile, run, curve).
     curve_points, curve_seeds : the learning curve's points after the initial one (:func:`curve_updates`) and its
         episodes (default ``CURVE_SEED .. CURVE_SEED + CURVE_EPISODES - 1``; checked to lie in the tuning range).

@@ -26,7 +26,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..runs import clear_run, write_json_atomic
-from ..train import TrainResult, xla_threads
+from ..train import TrainResult
+from ..xla import xla_threads
 from . import TRAINER
 from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, finish_config, jax_env,
                   run_config)

@@ -86,6 +86,7 @@ import optax
 
 from . import normalize as nz
 from .policy import ACTIVATIONS
+from ..xla import check_xla_runtime
 from .validate import (float_dtype, non_negative_int, pos_int, schedule, train_env_kwargs,
                        vec_normalize)
 
@@ -528,6 +529,7 @@ def offpolicy_train(cfg: SACConfig, hooks, env=None, env_params=None, snapshots=
     """The run of :func:`make_train` for an off-policy algorithm given by ``hooks`` (a class like
     :class:`SACHooks`, built with ``(cfg, obs_dim, act_dim)``): SB3's collect / train loop, the ring buffer,
     ``VecNormalize``, the learning-curve snapshots of ``learner[0]``'s ``pi_*`` arrays."""
+    check_xla_runtime(f"{cfg.TRAINER}.make_train")
     if env is None:
         env, env_params = make_env(cfg)
     elif env_params is None:
