@@ -7,6 +7,7 @@
   :func:`~.sac.sac_config`, :func:`~.sac.make_train` (replay ring buffer in the scan carry);
 - :mod:`.td3`: TD3 (SBX's) in the same off-policy loop: :func:`~.td3.td3_config`, :func:`~.td3.make_train`;
 - :mod:`.validate`: the recipe readers' validators (plain Python);
+- :mod:`.envs`: the JAX environment of a run's configuration (:func:`~.envs.make_env`, every algorithm's);
 - :mod:`.normalize`: VecNormalize's observation and reward normalisation as pure functions;
 - :mod:`.policy`: SB3's MlpPolicy actor-critic in JAX (PPO);
 - :mod:`.export`: a trained policy written as ``policy.npz`` + ``policy.json``;

@@ -53,6 +53,7 @@ import optax
 from . import normalize as nz
 from . import policy as pol
 from ..xla import check_xla_runtime
+from .envs import make_env
 from .validate import float_dtype, pos_int, schedule, train_env_kwargs, vec_normalize
 
 __all__ = ["PPOConfig", "HPARAMS", "ppo_config", "make_env", "make_train", "VecSlots", "gymnax_slots"]
@@ -173,13 +174,6 @@ def ppo_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
                "clip_obs": float(norm.get("clip_obs", 10.0)), "clip_reward": float(norm.get("clip_reward", 10.0)),
                "norm_epsilon": float(norm.get("epsilon", 1e-8))}
     return cfg, hparams
-
-
-def make_env(cfg: PPOConfig):
-    """``(env, env_params)``: :func:`dobs_envs.jax.make` of the run's id with its training options."""
-    from dobs_envs.jax import make
-
-    return make(cfg.env_id, normalized_actions=cfg.normalize_actions, dtype=cfg.dtype, **cfg.env_kwargs)
 
 
 def _clip_by_global_norm(grads, max_norm):

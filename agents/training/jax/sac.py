@@ -87,6 +87,7 @@ import optax
 from . import normalize as nz
 from .policy import ACTIVATIONS
 from ..xla import check_xla_runtime
+from .envs import make_env
 from .validate import (float_dtype, non_negative_int, pos_int, schedule, train_env_kwargs,
                        vec_normalize)
 
@@ -267,13 +268,6 @@ def sac_config(hyperparams: dict, env_id: str = "dobs_envs/Tracking-v0", *, tota
     cfg = SACConfig(env_id=env_id, ent_auto=ent_auto, use_sde=use_sde, **fields)
     hparams.update(ent_coef=alpha0, target_entropy=math.nan if target == "auto" else float(target))
     return cfg, hparams
-
-
-def make_env(cfg: SACConfig):
-    """``(env, env_params)``: :func:`dobs_envs.jax.make` of the run's id with its training options."""
-    from dobs_envs.jax import make
-
-    return make(cfg.env_id, normalized_actions=cfg.normalize_actions, dtype=cfg.dtype, **cfg.env_kwargs)
 
 
 # ---- networks (flax's Dense layout as plain arrays) ------------------------------------------------------------

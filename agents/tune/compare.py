@@ -1,0 +1,143 @@
+"""Choose between jitted PPO recipes on the tuning range: each candidate trained with the same fresh training
+seeds (vmapped, one compiled call per candidate) and scored on the same tuning episodes, as the sweep scores
+its trials (:mod:`agents.tune.sweep`: a run's score is its mean ``J_policy / J_paper`` over the episodes
+``TUNING.start + k``, never an evaluation seed).
+
+A sweep picks its winner from many points on two seeds and a few episodes, so the winner's score is biased
+low (the best of many noisy draws). Comparing a few finalists (the sweep's winner, the SB3 recipe run by the
+jitted trainer, ...) on more seeds and episodes, seeds the sweep did not use, gives the choice the benchmark's
+evaluation then tests.
+
+Candidates (``NAME=SOURCE``):
+
+- ``sb3``: SB3's shipped PPO recipe of the env (``agents/config/hyperparams/ppo.yaml`` without the jitted
+  trainer's sections), run by the jitted trainer;
+- ``jax``: the jitted trainer's shipped recipe (with its ``<env>-jax`` section);
+- a recipe file (rl-zoo3 format, e.g. the sweep's ``best.yml``): its section for the env merged over the jitted
+  trainer's recipe, as ``dobs-envs train --trainer jax --recipe FILE`` does.
+
+Usage: ``python -m agents.tune.compare --env tracking --candidate sb3=sb3 --candidate jax=jax --first-seed 100
+--seeds 8 --episodes 10 --out runs/compare_tracking`` writes ``compare.json``: per candidate the recipe, the
+per-seed scores, their mean, median and IQM, the CPU time; the winner (lowest mean); and per pair of candidates
+the probability of improvement over seeds (rliable's definition: ``P(X < Y)`` over the runs' scores, lower
+is better, ties counted half).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+from ..training.seeds import TUNING, check_episode_seeds, check_training_seeds
+
+__all__ = ["candidate_recipe", "compare_recipes", "main"]
+
+
+def candidate_recipe(source: str, env_name: str) -> dict:
+    """The merged hyperparameters of a candidate ``source`` (module doc: ``sb3``, ``jax`` or a recipe file)."""
+    from ..training.recipes import recipe_file_section, resolve_recipe
+
+    if source == "sb3":
+        return dict(resolve_recipe("ppo", env_name, trainer="sb3").hyperparams)
+    if source == "jax":
+        return dict(resolve_recipe("ppo", env_name, trainer="jax").hyperparams)
+    return dict(resolve_recipe("ppo", env_name, trainer="jax",
+                               overrides=recipe_file_section(source, env_name)).hyperparams)
+
+
+def _p_better(x: np.ndarray, y: np.ndarray) -> float:
+    """``P(X < Y)`` for a run ``X`` of ``x`` and ``Y`` of ``y`` (lower is better; ties count 1/2)."""
+    return float(np.mean((x[:, None] < y[None, :]) + 0.5 * (x[:, None] == y[None, :])))
+
+
+def _iqm(x: np.ndarray) -> float:
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(x, 0.25))
+
+
+def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
+                    dtype: str = "float32", overwrite: bool = False, log=print) -> dict:
+    """Train and score every candidate (``name -> source``, module doc) on ``seeds`` and the first ``episodes``
+    tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps the
+    finished ones) and returns the record."""
+    from ..training.curves import paper_costs
+    from .sweep import _run_structure, _write_json
+
+    if len(candidates) < 2:
+        raise ValueError(f"--candidate: give at least two candidates to compare, got {len(candidates)}")
+    seeds = [int(s) for s in seeds]
+    check_training_seeds(seeds[0], len(seeds), name="--first-seed")
+    episode_seeds = check_episode_seeds(TUNING.start, episodes, TUNING, name="tuning episode seed")
+    path = os.path.join(out, "compare.json")
+    if os.path.exists(path) and not overwrite:
+        raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out or pass "
+                              "--overwrite")
+    recipes = {name: candidate_recipe(src, env_name) for name, src in candidates.items()}  # errors before training
+    os.makedirs(out, exist_ok=True)
+    paper = paper_costs(env_name, {}, episode_seeds)
+    record = {"env": env_name, "algo": "ppo", "trainer": "jax", "timesteps": int(timesteps), "seeds": seeds,
+              "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "candidates": {}, "status": "running"}
+    for name, hp in recipes.items():
+        log(f"candidate {name} ({candidates[name]}): {len(seeds)} seeds")
+        scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype)
+        s = scores[0]
+        finite = s[np.isfinite(s)]
+        record["candidates"][name] = {
+            "source": candidates[name], "recipe": hp, "seed_scores": s.tolist(), **times,
+            "mean": float(np.mean(s)), "median": float(np.median(s)),
+            "iqm": _iqm(finite) if finite.size == s.size else math.inf}
+        log(f"  mean {np.mean(s):.4g}, median {np.median(s):.4g}, {times['cpu_seconds']:.0f} CPU s of training")
+        _write_json(path, record)
+    names = list(recipes)
+    sc = {n: np.asarray(record["candidates"][n]["seed_scores"]) for n in names}
+    record["p_improvement"] = {f"{a} < {b}": _p_better(sc[a], sc[b]) for a in names for b in names if a != b}
+    record["winner"] = min(names, key=lambda n: record["candidates"][n]["mean"])
+    record["status"] = "complete"
+    _write_json(path, record)
+    return record
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agents.tune.compare", description=__doc__.splitlines()[0])
+    ap.add_argument("--env", default="tracking")
+    ap.add_argument("--candidate", action="append", default=[], metavar="NAME=SOURCE",
+                    help="sb3, jax or a recipe file (module doc); repeat, at least two")
+    ap.add_argument("--timesteps", type=int, default=600_000)
+    ap.add_argument("--first-seed", type=int, default=100, help="training seeds first .. first + N - 1 (the "
+                    "benchmark trains seeds 0-9, a sweep 0 .. its --seeds - 1)")
+    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--episodes", type=int, default=10, help="tuning episodes per run (from the tuning range)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--overwrite", action="store_true")
+    args = ap.parse_args(argv)
+    from ..training.xla import xla_threads
+
+    xla_threads(1)
+    candidates = {}
+    for item in args.candidate:
+        name, sep, src = item.partition("=")
+        if not sep or not name or not src:
+            ap.error(f"--candidate {item!r}: expected NAME=SOURCE (SOURCE sb3, jax or a recipe file)")
+        if name in candidates:
+            ap.error(f"--candidate {name!r} given twice")
+        candidates[name] = src
+    if args.seeds < 1:
+        ap.error(f"--seeds must be a positive integer, got {args.seeds}")
+    from ..config.hyperparam_files import HyperparamsError
+
+    try:
+        compare_recipes(args.env, candidates, timesteps=args.timesteps,
+                        seeds=range(args.first_seed, args.first_seed + args.seeds), episodes=args.episodes,
+                        out=args.out, overwrite=args.overwrite)
+    except (ValueError, FileExistsError, HyperparamsError) as exc:
+        ap.error(str(exc))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

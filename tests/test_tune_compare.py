@@ -1,0 +1,78 @@
+"""Choosing between jitted PPO recipes on the tuning range (agents.tune.compare): candidates' recipes, the record
+and its statistics, with the real jitted trainer and the benchmark's harness."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("jax")
+
+from agents.training.recipes import resolve_recipe  # noqa: E402
+from agents.training.seeds import TUNING  # noqa: E402
+from agents.tune.compare import _p_better, candidate_recipe, compare_recipes, main  # noqa: E402
+
+TINY = {"n_envs": 2, "n_steps": 16, "batch_size": 32, "n_epochs": 1}
+
+
+def _recipe_file(path, **keys):
+    """A complete recipe section (rl-zoo3 reads a section alone) with a tiny structure; the keys it does not set
+    come from the jitted recipe when a comparison reads it."""
+    section = {"policy": "MlpPolicy", "n_timesteps": 64, **TINY, "learning_rate": 3e-4,
+               "policy_kwargs": "dict(net_arch=[64, 64], activation_fn=nn.Tanh, log_std_init=-2.0)", **keys}
+    path.write_text(yaml.safe_dump({"dobs_envs/Tracking-v0": section}))
+    return str(path)
+
+
+def test_candidates_are_the_shipped_recipes_or_a_file_over_the_jitted_one(tmp_path):
+    assert candidate_recipe("sb3", "tracking") == dict(resolve_recipe("ppo", "tracking").hyperparams)
+    jax_hp = candidate_recipe("jax", "tracking")
+    assert jax_hp == dict(resolve_recipe("ppo", "tracking", trainer="jax").hyperparams)
+    assert jax_hp["n_envs"] != candidate_recipe("sb3", "tracking")["n_envs"]  # the tracking-jax section applies
+    f = candidate_recipe(_recipe_file(tmp_path / "a.yml", learning_rate=5e-4), "tracking")
+    assert f["learning_rate"] == 5e-4 and f["n_envs"] == 2 and f["gae_lambda"] == jax_hp["gae_lambda"]
+
+
+def test_probability_of_improvement_counts_ties_half():
+    x, y = np.array([1.0, 2.0]), np.array([2.0, 3.0])
+    assert _p_better(x, y) == pytest.approx((1 + 1 + 0.5 + 1) / 4)
+    assert _p_better(x, y) + _p_better(y, x) == pytest.approx(1.0)
+
+
+def test_a_tiny_comparison_writes_its_record(tmp_path):
+    """Two tiny recipes x two fresh seeds x one tuning episode: per-seed scores (J/J_paper > 0), the winner the
+    lowest mean, P(a < b) + P(b < a) = 1; the record is never overwritten without --overwrite."""
+    a = _recipe_file(tmp_path / "a.yml", learning_rate=1e-3)
+    b = _recipe_file(tmp_path / "b.yml", learning_rate=1e-4)
+    out = tmp_path / "cmp"
+    rec = compare_recipes("tracking", {"a": a, "b": b}, timesteps=64, seeds=[100, 101], episodes=1, out=str(out),
+                          log=lambda *_: None)
+    doc = json.loads((out / "compare.json").read_text())
+    assert doc["status"] == "complete" and doc["episode_seeds"] == [TUNING.start] and doc["seeds"] == [100, 101]
+    for name, lr in (("a", 1e-3), ("b", 1e-4)):
+        c = doc["candidates"][name]
+        assert c["recipe"]["learning_rate"] == lr and len(c["seed_scores"]) == 2
+        assert all(s > 0 for s in c["seed_scores"]) and c["mean"] == pytest.approx(np.mean(c["seed_scores"]))
+    assert doc["winner"] == min("ab", key=lambda n: doc["candidates"][n]["mean"]) == rec["winner"]
+    assert doc["p_improvement"]["a < b"] + doc["p_improvement"]["b < a"] == pytest.approx(1.0)
+    with pytest.raises(SystemExit) as exc:
+        main(["--env", "tracking", "--candidate", f"a={a}", "--candidate", f"b={b}", "--out", str(out)])
+    assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--candidate", "a=sb3"], "at least two candidates"),
+    (["--candidate", "a", "--candidate", "b=jax"], "expected NAME=SOURCE"),
+    (["--candidate", "a=sb3", "--candidate", "a=jax"], "given twice"),
+    (["--candidate", "a=sb3", "--candidate", "b=/no/such.yml"], "does not exist"),
+    (["--candidate", "a=sb3", "--candidate", "b=jax", "--first-seed", "10000"], "--first-seed"),
+])
+def test_usage_errors_exit_2_with_one_line(tmp_path, capsys, argv, message):
+    with pytest.raises(SystemExit) as exc:
+        main(["--env", "tracking", "--out", str(tmp_path / "o"), *argv])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1]
+    assert not (tmp_path / "o").exists()
