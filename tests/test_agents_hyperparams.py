@@ -186,21 +186,24 @@ def test_env_section_is_agents_only_and_applied_after_the_gym_id_section(tmp_pat
 
 def test_the_jitted_trainer_reads_its_own_sections_last():
     """``trainer="jax"`` layers ``default-jax``, then ``<env>-jax`` (centralised) or ``<env>-ma-jax`` (shared) over
-    everything SB3 reads: the tracking recipe is SB3's with exactly the ``tracking-jax`` keys replaced; the shared
-    recipe does not take the centralised section; an env without a section trains SB3's recipe."""
+    everything SB3 reads: the random_network recipe is SB3's with exactly the ``random_network-jax``
+    keys replaced; the shared recipe does not take the centralised section; an env without a section (tracking,
+    disturbance_rejection, tracking_lossy) trains SB3's recipe."""
     from agents.config.hyperparam_files import read_hyperparams_file
 
     table = read_hyperparams_file(os.path.join(HYPERPARAMS_DIR, "ppo.yaml"))
-    section = table["tracking-jax"]
-    sb3 = load_hyperparams("ppo", "tracking")
-    jx = load_hyperparams("ppo", "tracking", trainer="jax")
+    section = table["random_network-jax"]
+    sb3 = load_hyperparams("ppo", "random_network")
+    jx = load_hyperparams("ppo", "random_network", trainer="jax")
     assert set(section) and {k for k in jx if jx[k] != sb3.get(k)} <= set(section)
     assert all(jx[k] == v for k, v in section.items())
-    assert resolve_recipe("ppo", "tracking", trainer="jax").hyperparams == jx
-    assert "default-jax" not in table and "tracking_lossy-jax" not in table
-    assert load_hyperparams("ppo", "tracking_lossy", trainer="jax") == load_hyperparams("ppo", "tracking_lossy")
-    assert "tracking-ma-jax" not in table
-    assert load_hyperparams("ppo", "tracking", multi_agent=True, trainer="jax") == load_hyperparams(
-        "ppo", "tracking", multi_agent=True)
+    assert resolve_recipe("ppo", "random_network", trainer="jax").hyperparams == jx
+    assert "default-jax" not in table
+    for env in ("tracking", "disturbance_rejection", "tracking_lossy"):
+        assert f"{env}-jax" not in table
+        assert load_hyperparams("ppo", env, trainer="jax") == load_hyperparams("ppo", env)
+    assert "random_network-ma-jax" not in table
+    assert load_hyperparams("ppo", "random_network", multi_agent=True, trainer="jax") == load_hyperparams(
+        "ppo", "random_network", multi_agent=True)
     with pytest.raises(ValueError, match="trainer must be one of"):
         load_hyperparams("ppo", "tracking", trainer="rllib")

@@ -17,7 +17,7 @@ pytest.importorskip("optax")
 from dobs_envs.cli import main  # noqa: E402
 from jax_run_records import CONFIG_KEYS  # noqa: E402
 
-#: a smaller rollout than the jitted trainer's tracking recipe (tracking-jax: 64 x 128; SB3's 8 x 512): 8 x 128 with
+#: a smaller rollout than the jitted trainer's tracking recipe (SB3's: 8 copies x 512 steps): 8 x 128 with
 #: minibatches of 256 (2 updates within --timesteps 2048: a curve of 3 points)
 HP = {"n_envs": 8, "n_steps": 128, "batch_size": 256, "n_epochs": 2}
 

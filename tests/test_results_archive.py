@@ -31,13 +31,14 @@ ARCHIVES = {
                                      {"hetero_mas": ("docs/results/tuned_ppo.md",
                                                     "## The tuned PPO recipe on hetero_mas (full budget)")}, ["ppo"]),
     # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
-    # issue 40: the jitted PPO, 10 seeds vmapped in one call, with its own tracking recipe (tracking-jax)
+    # issue 40: the jitted PPO, 10 seeds vmapped in one call, with SB3's tracking recipe (chosen over the sweep's winner
+    # on the tuning range, ppo.yaml)
     # + the jitted shared PPO and the jitted SAC (SB3/SBX's tracking recipes), 10 seeds vmapped each
     "tracking_full_jax_runs.tar.gz": ("tracking", "full", 30,
                                       {"tracking": ("docs/results/full_tracking_jax.md",
                                                     "## The jitted agents (full budget, tracking)")},
                                       ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
-    # the jitted PPO (tuned section disturbance_rejection-jax), shared PPO and SAC (SB3's recipes)
+    # the jitted PPO, shared PPO and SAC with SB3's recipes (random_network: PPO with its section random_network-jax)
     "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 30,
                                                    {"disturbance_rejection": (
                                                        "docs/results/full_disturbance_rejection.md",

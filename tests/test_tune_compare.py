@@ -30,7 +30,11 @@ def test_candidates_are_the_shipped_recipes_or_a_file_over_the_jitted_one(tmp_pa
     assert candidate_recipe("sb3", "tracking") == dict(resolve_recipe("ppo", "tracking").hyperparams)
     jax_hp = candidate_recipe("jax", "tracking")
     assert jax_hp == dict(resolve_recipe("ppo", "tracking", trainer="jax").hyperparams)
-    assert jax_hp["n_envs"] != candidate_recipe("sb3", "tracking")["n_envs"]  # the tracking-jax section applies
+    rn = "random_network"  # its -jax section applies to the jax candidate only
+    assert candidate_recipe("jax", rn)["n_envs"] != candidate_recipe("sb3", rn)["n_envs"]
+    for source in ("sb3", "jax"):  # --multi-agent: the shared policy's sections
+        assert candidate_recipe(source, "tracking", multi_agent=True) == dict(
+            resolve_recipe("ppo", "tracking", multi_agent=True, trainer=source).hyperparams)
     f = candidate_recipe(_recipe_file(tmp_path / "a.yml", learning_rate=5e-4), "tracking")
     assert f["learning_rate"] == 5e-4 and f["n_envs"] == 2 and f["gae_lambda"] == jax_hp["gae_lambda"]
 

@@ -42,11 +42,39 @@ def test_a_tiny_sweep_writes_its_record_and_a_recipe_that_trains(tmp_path):
     from agents.training.jax.ppo import ppo_config
 
     best = yaml.safe_load((tmp_path / "best.yml").read_text())
-    (section, hp), = best.items()
-    assert section == "dobs_envs/Tracking-v0" and hp["n_envs"] == 2 and hp["n_timesteps"] == 64
+    (section, raw), = best.items()
+    assert section == "dobs_envs/Tracking-v0" and raw["n_envs"] == 2 and raw["n_timesteps"] == 64
+    from agents.training.recipes import recipe_file_section
+    from agents.tune.compare import candidate_recipe
+
+    # a recipe file in rl-zoo3's vocabulary, as `train --recipe` and `agents.tune.compare` read it
+    hp = recipe_file_section(str(tmp_path / "best.yml"), "tracking")
     cfg, hps = ppo_config(hp, section)
     for k, v in doc["best"]["floats"].items():
         assert hps[k] == pytest.approx(v, rel=1e-5), k
+    assert ppo_config(candidate_recipe(str(tmp_path / "best.yml"), "tracking"), section)[1] == hps
     with pytest.raises(SystemExit) as exc:  # the record is never overwritten without --overwrite
         main(["--env", "tracking", "--out", str(tmp_path), "--timesteps", "64"])
     assert exc.value.code == 2
+
+
+def test_a_tiny_shared_policy_sweep_scores_through_the_pettingzoo_env(tmp_path):
+    """--multi-agent: the shared-policy PPO's recipe (agent_id from the -ma sections), its runs scored on the
+    PettingZoo env; best.yml is the ppo.yaml section tracking-ma-jax, which ippo_config reads back with the
+    winner's floats."""
+    from agents.training.jax.ippo import ippo_config
+    from agents.training.recipes import resolve_recipe
+
+    structure = {"n_envs": 2, "n_steps": 16, "batch_size": 32, "n_epochs": 1}
+    rec = run_sweep("tracking", timesteps=64, structures=[structure], draws=2, seeds=[0], episodes=1,
+                    out=str(tmp_path), multi_agent=True, log=lambda *_: None)
+    assert rec["multi_agent"] and rec["recipe"] == dict(resolve_recipe("ppo", "tracking", multi_agent=True,
+                                                                       trainer="jax").hyperparams)
+    assert all(t["score"] > 0 for t in rec["trials"])
+    text = (tmp_path / "best.yml").read_text()
+    assert "shared-policy PPO" in text
+    (section, hp), = yaml.safe_load(text).items()
+    assert section == "tracking-ma-jax" and hp["n_envs"] == 2 and hp["agent_id"] == rec["recipe"]["agent_id"]
+    _, hps = ippo_config(hp, "tracking", total_timesteps=64)
+    for k, v in rec["best"]["floats"].items():
+        assert hps[k] == pytest.approx(v, rel=1e-5), k

@@ -16,6 +16,9 @@ Candidates (``NAME=SOURCE``):
 - a recipe file (rl-zoo3 format, e.g. the sweep's ``best.yml``): its section for the env merged over the jitted
   trainer's recipe, as ``dobs-envs train --trainer jax --recipe FILE`` does.
 
+``--multi-agent``: the shared-policy PPO's recipes (``dobs-envs train --multi-agent``'s sections), trained and
+scored as :mod:`agents.tune.sweep` does with ``--multi-agent``.
+
 Usage: ``python -m agents.tune.compare --env tracking --candidate sb3=sb3 --candidate jax=jax --first-seed 100
 --seeds 8 --episodes 10 --out runs/compare_tracking`` writes ``compare.json``: per candidate the recipe, the
 per-seed scores, their mean, median and IQM, the CPU time; the winner (lowest mean); and per pair of candidates
@@ -37,15 +40,14 @@ from ..training.seeds import TUNING, check_episode_seeds, check_training_seeds
 __all__ = ["candidate_recipe", "compare_recipes", "main"]
 
 
-def candidate_recipe(source: str, env_name: str) -> dict:
-    """The merged hyperparameters of a candidate ``source`` (module doc: ``sb3``, ``jax`` or a recipe file)."""
+def candidate_recipe(source: str, env_name: str, multi_agent: bool = False) -> dict:
+    """The merged hyperparameters of a candidate ``source`` (module doc: ``sb3``, ``jax`` or a recipe file);
+    ``multi_agent``: the shared-policy recipe (``dobs-envs train --multi-agent``'s sections)."""
     from ..training.recipes import recipe_file_section, resolve_recipe
 
-    if source == "sb3":
-        return dict(resolve_recipe("ppo", env_name, trainer="sb3").hyperparams)
-    if source == "jax":
-        return dict(resolve_recipe("ppo", env_name, trainer="jax").hyperparams)
-    return dict(resolve_recipe("ppo", env_name, trainer="jax",
+    if source in ("sb3", "jax"):
+        return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer=source).hyperparams)
+    return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer="jax",
                                overrides=recipe_file_section(source, env_name)).hyperparams)
 
 
@@ -61,10 +63,10 @@ def _iqm(x: np.ndarray) -> float:
 
 
 def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
-                    dtype: str = "float32", overwrite: bool = False, log=print) -> dict:
+                    dtype: str = "float32", overwrite: bool = False, multi_agent: bool = False, log=print) -> dict:
     """Train and score every candidate (``name -> source``, module doc) on ``seeds`` and the first ``episodes``
     tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps the
-    finished ones) and returns the record."""
+    finished ones) and returns the record. ``multi_agent``: the shared-policy PPO (as :mod:`agents.tune.sweep`'s)."""
     from ..training.curves import paper_costs
     from .sweep import _run_structure, _write_json
 
@@ -77,14 +79,16 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
     if os.path.exists(path) and not overwrite:
         raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out or pass "
                               "--overwrite")
-    recipes = {name: candidate_recipe(src, env_name) for name, src in candidates.items()}  # errors before training
+    # errors before training
+    recipes = {name: candidate_recipe(src, env_name, multi_agent) for name, src in candidates.items()}
     os.makedirs(out, exist_ok=True)
     paper = paper_costs(env_name, {}, episode_seeds)
-    record = {"env": env_name, "algo": "ppo", "trainer": "jax", "timesteps": int(timesteps), "seeds": seeds,
+    record = {"env": env_name, "algo": "ppo", "trainer": "jax", "multi_agent": bool(multi_agent),
+              "timesteps": int(timesteps), "seeds": seeds,
               "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "candidates": {}, "status": "running"}
     for name, hp in recipes.items():
         log(f"candidate {name} ({candidates[name]}): {len(seeds)} seeds")
-        scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype)
+        scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype, multi_agent)
         s = scores[0]
         finite = s[np.isfinite(s)]
         record["candidates"][name] = {
@@ -114,6 +118,7 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=10, help="tuning episodes per run (from the tuning range)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--multi-agent", action="store_true", help="the shared-policy PPO's recipes")
     args = ap.parse_args(argv)
     from ..training.xla import xla_threads
 
@@ -133,7 +138,7 @@ def main(argv=None) -> int:
     try:
         compare_recipes(args.env, candidates, timesteps=args.timesteps,
                         seeds=range(args.first_seed, args.first_seed + args.seeds), episodes=args.episodes,
-                        out=args.out, overwrite=args.overwrite)
+                        out=args.out, overwrite=args.overwrite, multi_agent=args.multi_agent)
     except (ValueError, FileExistsError, HyperparamsError) as exc:
         ap.error(str(exc))
     return 0

@@ -21,6 +21,9 @@ winner's figures against trial 0 in its comments.
 Usage: ``python -m agents.tune.sweep --env tracking --timesteps 600000 --structures FILE.json --draws 31
 --seeds 2 --episodes 5 --out runs/sweep_tracking`` (``--structures``: a JSON list of dicts of the static
 keys; default :data:`STRUCTURES`).
+``--multi-agent`` sweeps the shared-policy PPO instead (:mod:`agents.training.jax.ippo`: one policy for every
+controller node, each acting on its own node's observation, scored through the PettingZoo env as the
+benchmark's "PPO (JAX, shared)" row); its ``best.yml`` is a ``<env>-ma-jax`` section for ``ppo.yaml``.
 """
 from __future__ import annotations
 
@@ -92,24 +95,53 @@ def _structure_recipe(base: dict, structure: dict) -> dict:
 
 
 def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], seeds: list[int],
-                   episode_seeds: list[int], paper: np.ndarray, dtype: str) -> tuple[np.ndarray, dict]:
+                   episode_seeds: list[int], paper: np.ndarray, dtype: str,
+                   multi_agent: bool = False) -> tuple[np.ndarray, dict]:
     """``(scores (P, S), times)``: every point x training seed of one structure, trained in one vmapped
     compiled call, each run scored as its mean J/J_paper on ``episode_seeds``; ``times``: CPU and wall
-    seconds of the compilation and of the compiled call."""
+    seconds of the compilation and of the compiled call. ``multi_agent``: ``hp`` is a shared-policy recipe,
+    trained by :mod:`agents.training.jax.ippo` and scored through :class:`agents.vecenv.slots.SlotEncoder` on
+    the PettingZoo env, as ``dobs-envs train --trainer jax --multi-agent`` runs are (its ``dtype`` is the
+    recipe's)."""
     import jax
     import jax.numpy as jnp
 
-    from ..config.envs import gym_factory
+    from ..config.envs import gym_factory, parallel_factory
     from ..evaluate import run_episode
     from ..training.jax.export import policy_arrays, select_run
     from ..training.jax.numpy_policy import NumpyPolicy
-    from ..training.jax.ppo import HPARAMS, make_env, make_train, ppo_config
+    from ..training.jax.ppo import HPARAMS
     from ..training.jax.run import jax_env
 
     _, jid = jax_env(env_name)
-    cfg, hp0 = ppo_config(hp, jid, total_timesteps=timesteps, dtype=dtype)
-    env, env_params = make_env(cfg)
-    train = make_train(cfg, env, env_params)
+    if multi_agent:
+        from ..training.jax.ippo import make_train as ippo_make_train
+        from ..training.jax.run_marl import build_marl_run, shared_export
+        from ..training.loading import slot_policy
+        from ..vecenv.slots import SlotEncoder
+
+        run = build_marl_run("ppo", env_name, jid, hp, timesteps)
+        cfg, hp0 = run.cfg, run.hp
+        train = ippo_make_train(cfg, run.env)
+        env_np = parallel_factory(env_name, {})()
+        agents = list(env_np.possible_agents)
+        enc = SlotEncoder(agents, {a: env_np.observation_space(a) for a in agents},
+                          {a: env_np.action_space(a) for a in agents}, agent_id=run.layout.agent_id,
+                          rescale_actions=run.layout.rescale)
+        cfg_p, space, _ = shared_export(cfg, run.layout)
+
+        def policy(run_i, hp_i):
+            return slot_policy(enc, NumpyPolicy.from_arrays(*policy_arrays(run_i, cfg_p, hp_i, space, None)))
+    else:
+        from ..training.jax.ppo import make_env, make_train, ppo_config
+
+        cfg, hp0 = ppo_config(hp, jid, total_timesteps=timesteps, dtype=dtype)
+        env, env_params = make_env(cfg)
+        train = make_train(cfg, env, env_params)
+        env_np = gym_factory(env_name, {})()
+
+        def policy(run_i, hp_i):
+            return NumpyPolicy.from_arrays(*policy_arrays(run_i, cfg, hp_i, env, env_params))
     P, S = len(points), len(seeds)
     hps = {k: jnp.asarray(np.repeat([p.get(k, hp0[k]) for p in points], S), jnp.float32)
            if k in FLOAT_SPACE else jnp.asarray(np.full(P * S, hp0[k]), jnp.float32) for k in HPARAMS}
@@ -122,13 +154,10 @@ def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], 
     result = jax.block_until_ready(run_all(keys, hps))
     times = {"compile_cpu_seconds": c1 - c0, "compile_wall_seconds": w1 - w0,
              "cpu_seconds": time.process_time() - c1, "wall_seconds": time.perf_counter() - w1}
-    env_np = gym_factory(env_name, {})()
     scores = np.empty(P * S)
     for i in range(P * S):
-        run = select_run(result, i)
-        hp_i = {k: float(hps[k][i]) for k in HPARAMS}
-        pol = NumpyPolicy.from_arrays(*policy_arrays(run, cfg, hp_i, env, env_params))
-        costs = np.array([run_episode(env_np, pol, s, parallel=False).cost for s in episode_seeds])
+        pol = policy(select_run(result, i), {k: float(hps[k][i]) for k in HPARAMS})
+        costs = np.array([run_episode(env_np, pol, s, parallel=multi_agent).cost for s in episode_seeds])
         ratio = costs / paper
         scores[i] = float(np.mean(ratio)) if np.all(np.isfinite(ratio)) else math.inf
     env_np.close()
@@ -137,10 +166,12 @@ def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], 
 
 def run_sweep(env_name: str, *, timesteps: int, structures: list[dict] | None = None, draws: int = 16,
               seeds=(0, 1), episodes: int = 5, sampler_seed: int = 0, out: str, dtype: str = "float32",
-              overwrite: bool = False, log=print) -> dict:
+              overwrite: bool = False, multi_agent: bool = False, log=print) -> dict:
     """Sweep the jitted PPO on ``env_name`` (module doc); writes ``out/sweep.json`` and ``out/best.yml`` and
     returns the record. The recipe is the jitted trainer's shipped PPO recipe of the env
-    (:func:`agents.training.recipes.resolve_recipe` with ``trainer="jax"``), each structure's keys merged over it."""
+    (:func:`agents.training.recipes.resolve_recipe` with ``trainer="jax"``), each structure's keys merged over it.
+    ``multi_agent``: the shared-policy PPO (:mod:`agents.training.jax.ippo`, the recipe of ``dobs-envs train
+    --trainer jax --multi-agent``); ``best.yml`` then holds the section ``<env>-ma-jax`` of ``ppo.yaml``."""
     from ..training.curves import paper_costs
     from ..training.recipes import resolve_recipe
 
@@ -153,23 +184,29 @@ def run_sweep(env_name: str, *, timesteps: int, structures: list[dict] | None = 
         raise FileExistsError(f"{path} exists (a finished or interrupted sweep): choose another --out or pass "
                               "--overwrite")
     os.makedirs(out, exist_ok=True)
-    recipe = resolve_recipe("ppo", env_name, trainer="jax")  # the jitted trainer's recipe: its sections too
+    # the jitted trainer's recipe: its sections too
+    recipe = resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer="jax")
     base = dict(recipe.hyperparams)
     structures = [dict(s) for s in (structures or STRUCTURES)]
     paper = paper_costs(env_name, {}, episode_seeds)
     record = {"env": env_name, "algo": "ppo", "trainer": "jax", "timesteps": int(timesteps), "seeds": seeds,
               "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "float_space": FLOAT_SPACE,
-              "draws": int(draws), "sampler_seed": int(sampler_seed), "recipe": base, "structures": [], "trials": [],
-              "status": "running"}
+              "draws": int(draws), "sampler_seed": int(sampler_seed), "recipe": base, "multi_agent": bool(multi_agent),
+              "structures": [], "trials": [], "status": "running"}
+    from ..training.jax.ippo import ippo_config
     from ..training.jax.ppo import ppo_config
     from ..training.jax.run import jax_env
 
     for j, structure in enumerate(structures):
         hp = _structure_recipe(base, structure)
-        _, hp0 = ppo_config(hp, jax_env(env_name)[1], total_timesteps=timesteps, dtype=dtype)
+        if multi_agent:
+            _, hp0 = ippo_config(hp, env_name, total_timesteps=timesteps)
+        else:
+            _, hp0 = ppo_config(hp, jax_env(env_name)[1], total_timesteps=timesteps, dtype=dtype)
         points = sample_floats(hp0, draws, sampler_seed + j)
         log(f"structure {j + 1}/{len(structures)} {structure}: {len(points)} points x {len(seeds)} seeds")
-        scores, times = _run_structure(env_name, hp, timesteps, points, seeds, episode_seeds, paper, dtype)
+        scores, times = _run_structure(env_name, hp, timesteps, points, seeds, episode_seeds, paper, dtype,
+                                       multi_agent)
         record["structures"].append({"structure": structure, **times, "runs": len(points) * len(seeds)})
         for p, row in zip(points, scores):
             record["trials"].append({"trial": len(record["trials"]), "structure": j, "floats": p,
@@ -209,7 +246,8 @@ def _write_best(path: str, record: dict, base: dict, structure: dict, best: dict
             hp[k] = float(f"{v:.6g}")
     trial0 = [t for t in record["trials"] if t["structure"] == best["structure"] and t["recipe_floats"]][0]
     ranges = ", ".join(f"{k} {kind} [{lo:g}, {hi:g}]" for k, (kind, lo, hi) in FLOAT_SPACE.items())
-    lines = [f"# Jitted PPO recipe for {record['env']}, chosen by agents/tune/sweep.py on the tuning range",
+    what = "shared-policy PPO" if record.get("multi_agent") else "PPO"
+    lines = [f"# Jitted {what} recipe for {record['env']}, chosen by agents/tune/sweep.py on the tuning range",
              f"# (episodes {record['episode_seeds'][0]}-{record['episode_seeds'][-1]}, training seeds {record['seeds']}, "
              f"{record['timesteps']} env steps per run).",
              f"# Search space: structures {[s['structure'] for s in record['structures']]}; floats {ranges};",
@@ -218,9 +256,18 @@ def _write_best(path: str, record: dict, base: dict, structure: dict, best: dict
              f"(one core; compilation {sum(s['compile_cpu_seconds'] for s in record['structures']):.0f} CPU s).",
              f"# Winner: trial {best['trial']} score (mean J/J_paper) {best['score']:.4g}; the shipped recipe's "
              f"floats in the same structure: {trial0['score']:.4g}."]
+    section = gym_id(record["env"])
+    if record.get("multi_agent"):  # an agents-only section of agents/config/hyperparams/ppo.yaml (rl-zoo3 skips it)
+        section = f"{record['env']}-ma-jax"
+    else:  # a section rl-zoo3 reads (train / compare --recipe FILE): its vocabulary
+        from .outputs import recipe_section
+
+        hp = recipe_section(hp)
+        lines.append(f"# The section {section} of agents/config/hyperparams/ppo.yaml (read by dobs-envs train "
+                     "--trainer jax --multi-agent).")
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
-        yaml.safe_dump({gym_id(record["env"]): hp}, fh, sort_keys=False)
+        yaml.safe_dump({section: hp}, fh, sort_keys=False)
 
 
 def main(argv=None) -> int:
@@ -234,6 +281,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sampler-seed", type=int, default=0)
     ap.add_argument("--out", required=True)
     ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--multi-agent", action="store_true", help="the shared-policy PPO (one policy for every "
+                    "controller node, each acting on its own observation)")
     ap.add_argument("--threads", type=int, default=1, help="XLA threads (1: one core, as the benchmark's runs; 0: "
                     "XLA's default pool)")
     args = ap.parse_args(argv)
@@ -252,7 +301,7 @@ def main(argv=None) -> int:
     try:
         run_sweep(args.env, timesteps=args.timesteps, structures=structures, draws=args.draws,
                   seeds=range(args.seeds), episodes=args.episodes, sampler_seed=args.sampler_seed, out=args.out,
-                  overwrite=args.overwrite)
+                  overwrite=args.overwrite, multi_agent=args.multi_agent)
     except (ValueError, FileExistsError) as exc:
         ap.error(str(exc))
     return 0
