@@ -62,9 +62,9 @@ def test_runs_per_agent_and_the_paper_is_the_unit(tiny_run):
 
 def test_rows_state_information_budget_and_run_level_statistics(tiny_run):
     """The training run is the statistical unit: each row's IQM, CI, mean and probability of
-    improvement are those of agents.benchmark.stats applied to the per-run scores recomputed here from the
+    improvement are those of agents.stats applied to the per-run scores recomputed here from the
     stored per-episode costs; every row says what it sees, learned rows their budget."""
-    from agents.benchmark.stats import improvement_estimate, interval_estimate, mean_estimate, run_scores
+    from agents.stats import improvement_estimate, interval_estimate, mean_estimate, run_scores
 
     _, _, doc = tiny_run
     paper = np.array(doc["paper_cost"])

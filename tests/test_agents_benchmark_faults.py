@@ -52,10 +52,10 @@ def test_runs_end_to_end_with_every_policy_and_the_degradation_columns(lossy_run
 
 
 def test_degradation_is_the_main_ratio_statistics_over_the_fault_free_paper(lossy_run):
-    """Recomputed here from the stored per-episode costs with agents.benchmark.stats: IQM, CI and mean over runs of the
+    """Recomputed here from the stored per-episode costs with agents.stats: IQM, CI and mean over runs of the
     run means of J / J_paper,fault-free; the reference costs are those of the paper's controller on tracking."""
     from agents.evaluate import evaluate_policy
-    from agents.benchmark.stats import interval_estimate, mean_estimate, run_scores
+    from agents.stats import interval_estimate, mean_estimate, run_scores
     from baselines.policies import SeparationPolicy
     from dobs_envs import tracking_v0
 

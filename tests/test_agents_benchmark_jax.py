@@ -81,8 +81,8 @@ def test_named_agents_train_their_budgets_steps_whatever_the_trainer(trainer):
 
 def test_jitted_rows_count_each_seed_as_a_run(first):
     """The table has the two jitted rows (runs = the budget's seeds, IQM inside its run-level CI, the counterpart's
-    env steps) next to every analytic row, and their statistics are agents.benchmark.stats' on the stored runs."""
-    from agents.benchmark.stats import interval_estimate, run_scores
+    env steps) next to every analytic row, and their statistics are agents.stats' on the stored runs."""
+    from agents.stats import interval_estimate, run_scores
 
     out, summ, doc = first
     assert summ["trainer"] == "jax"

@@ -1,10 +1,10 @@
-"""agents.benchmark.stats implements rliable's IQM and stratified bootstrap: checked against rliable itself."""
+"""agents.stats implements rliable's IQM and stratified bootstrap: checked against rliable itself."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agents.benchmark.stats import (improvement_estimate, interval_estimate, iqm, mean_estimate,
+from agents.stats import (improvement_estimate, interval_estimate, iqm, mean_estimate,
                                     probability_of_improvement, run_bootstrap, run_scores, stratified_bootstrap_ci)
 
 
@@ -134,3 +134,11 @@ def test_improvement_inputs_are_checked():
         improvement_estimate(np.array([[np.nan, 1.0]]), np.ones(2))
     with pytest.raises(ValueError, match="runs must be a positive integer"):
         run_bootstrap(0)
+
+
+def test_the_former_import_path_gives_the_same_functions():
+    import agents.benchmark.stats as former
+    import agents.stats as stats
+
+    assert former.__all__ == stats.__all__
+    assert all(getattr(former, n) is getattr(stats, n) for n in stats.__all__)

@@ -43,6 +43,9 @@ def test_probability_of_improvement_counts_ties_half():
     x, y = np.array([1.0, 2.0]), np.array([2.0, 3.0])
     assert _p_better(x, y) == pytest.approx((1 + 1 + 0.5 + 1) / 4)
     assert _p_better(x, y) + _p_better(y, x) == pytest.approx(1.0)
+    # a diverged run (score inf) loses to every finite one and ties with another diverged run
+    d = np.array([np.inf, 1.0])
+    assert _p_better(d, np.array([np.inf, 2.0])) == pytest.approx((0.5 + 0 + 1 + 1) / 4)
 
 
 def test_a_tiny_comparison_writes_its_record(tmp_path):

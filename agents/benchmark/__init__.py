@@ -4,8 +4,8 @@
 :mod:`~agents.benchmark.plan` (agent and budget tables, what trains, what a stored run answers),
 :mod:`~agents.benchmark.backends` (where jobs run: serial, process pool, Ray), :mod:`~agents.benchmark.tasks` (the
 work units a worker runs), :mod:`~agents.benchmark.store` (the ``--out`` directory and the run records),
-:mod:`~agents.benchmark.report` (aggregation, tables, figures) and :mod:`~agents.benchmark.stats` (rliable's
-statistics with the training run as the unit).
+:mod:`~agents.benchmark.report` (aggregation, tables, figures); the statistics are :mod:`agents.stats`
+(rliable's, with the training run as the unit; :mod:`~agents.benchmark.stats` re-exports them).
 
 The public names of the module ``agents.benchmark`` before issue 38 (``from agents.benchmark import
 run_benchmark``, ``agents.benchmark.foreign_entries``, ...) are still found here; they are imported on first use,

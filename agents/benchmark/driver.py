@@ -20,7 +20,7 @@
    controller, the full-state oracle, the no-communication decentralised controller
    and zero input -- on the *same* ``K`` episodes of the task's own environment
    (reset with seeds ``eval_seed + k``, recorded with each episode's ``x(0)``).
-3. **Aggregate** as rliable defines it, with the training run as the unit (:mod:`agents.benchmark.stats`):
+3. **Aggregate** as rliable defines it, with the training run as the unit (:mod:`agents.stats`):
    a run's score is the mean over the episodes of the cost ratio ``J_policy / J_paper`` on the
    same episode (< 1: cheaper than the paper's controller); the IQM and the mean of the run
    scores with 95 % percentile-bootstrap CIs that resample whole runs, the probability of

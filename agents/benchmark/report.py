@@ -1,5 +1,5 @@
 """Benchmark reporting: the rows of the results table from the runs' records (rliable statistics with
-the training run as the unit, :mod:`agents.benchmark.stats`), the text and Markdown tables, the figures, and the
+the training run as the unit, :mod:`agents.stats`), the text and Markdown tables, the figures, and the
 files ``<out>/<env>/results.{json,csv,md}``, ``error_norms.png``, ``learning_curves.png`` and
 ``<out>/summary.{json,png}`` (:func:`write_env_report`, :func:`write_summary`). On an environment with communication
 faults (``tracking_lossy``) every row also has the degradation ``J / J_paper,fault-free`` (:data:`DEGRADATION_DOC`).
@@ -15,7 +15,7 @@ import numpy as np
 from ..config.envs import FAULT_FREE
 from ..evaluate import STEADY_S, TRANSIENT_S
 from .plan import ANALYTIC_INFO, PAPER, BenchmarkPlan, agent_spec
-from .stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
+from ..stats import improvement_estimate, interval_estimate, iqm, mean_estimate, run_scores
 from .tasks import mean_trajectory
 
 __all__ = ["write_env_report", "write_summary", "format_table", "format_markdown", "aggregate_over_envs",
@@ -71,7 +71,7 @@ def _ratio_columns(key: str, cost: np.ndarray, reference: np.ndarray) -> tuple[n
     """The run scores of ``cost (runs, episodes) / reference (episodes,)`` (a run's score: the mean of its
     episodes' ratios) and their statistics as row entries: ``<key>_iqm``, ``<key>_ci_low``, ``<key>_ci_high``
     (IQM over runs, 95 % percentile-bootstrap CI over runs) and ``<key>_mean``, ``<key>_mean_ci_low``,
-    ``<key>_mean_ci_high`` (:mod:`agents.benchmark.stats`). The one computation behind ``cost_ratio`` (``J / J_paper``)
+    ``<key>_mean_ci_high`` (:mod:`agents.stats`). The one computation behind ``cost_ratio`` (``J / J_paper``)
     and ``degradation`` (``J / J_paper,fault-free``)."""
     scores = run_scores(cost / reference[None, :])
     est, mean = interval_estimate(scores), mean_estimate(scores)
@@ -85,7 +85,7 @@ def _aggregate(label: str, kind: str, runs: list[dict], paper_cost: np.ndarray, 
     """Row of the results table from ``runs`` (one payload per training run; one for a deterministic
     analytic controller).
 
-    The training run is the statistical unit (:mod:`agents.benchmark.stats`): a run's score is the mean of its
+    The training run is the statistical unit (:mod:`agents.stats`): a run's score is the mean of its
     per-episode values (cost ratio ``J / J_paper``, failed episodes at their penalty cost; likewise the
     transient cost and the errors); the row gives the IQM of the run scores with a 95 % percentile
     bootstrap CI over runs, the mean cost ratio with its CI (a failure cannot be trimmed away), the

@@ -35,6 +35,7 @@ import sys
 
 import numpy as np
 
+from ..stats import iqm, probability_of_improvement
 from ..training.seeds import TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["candidate_recipe", "compare_recipes", "main"]
@@ -52,14 +53,12 @@ def candidate_recipe(source: str, env_name: str, multi_agent: bool = False) -> d
 
 
 def _p_better(x: np.ndarray, y: np.ndarray) -> float:
-    """``P(X < Y)`` for a run ``X`` of ``x`` and ``Y`` of ``y`` (lower is better; ties count 1/2)."""
-    return float(np.mean((x[:, None] < y[None, :]) + 0.5 * (x[:, None] == y[None, :])))
-
-
-def _iqm(x: np.ndarray) -> float:
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(x, 0.25))
+    """``P(X < Y)`` for a run ``X`` of ``x`` and ``Y`` of ``y`` (:func:`agents.stats.probability_of_improvement`
+    on one task). A diverged run scores ``inf`` (``nan`` is treated alike). The statistic depends on the order of
+    the scores only, so ``inf`` is passed as the largest float: two diverged runs tie, as two ``inf`` would."""
+    big = np.finfo(np.float64).max
+    return probability_of_improvement(np.nan_to_num(x, nan=big, posinf=big)[:, None],
+                                      np.nan_to_num(y, nan=big, posinf=big)[:, None])
 
 
 def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
@@ -94,7 +93,7 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
         record["candidates"][name] = {
             "source": candidates[name], "recipe": hp, "seed_scores": s.tolist(), **times,
             "mean": float(np.mean(s)), "median": float(np.median(s)),
-            "iqm": _iqm(finite) if finite.size == s.size else math.inf}
+            "iqm": float(iqm(s)) if finite.size == s.size else math.inf}
         log(f"  mean {np.mean(s):.4g}, median {np.median(s):.4g}, {times['cpu_seconds']:.0f} CPU s of training")
         _write_json(path, record)
     names = list(recipes)
