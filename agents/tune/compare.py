@@ -106,7 +106,8 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m agents.tune.compare", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m agents.tune.compare",
+                                 description=" ".join(__doc__.split("\n\n")[0].split()))  # the first paragraph
     ap.add_argument("--env", default="tracking")
     ap.add_argument("--candidate", action="append", default=[], metavar="NAME=SOURCE",
                     help="sb3, jax or a recipe file (module doc); repeat, at least two")

@@ -271,7 +271,8 @@ def _write_best(path: str, record: dict, base: dict, structure: dict, best: dict
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m agents.tune.sweep", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m agents.tune.sweep",
+                                 description=" ".join(__doc__.split("\n\n")[0].split()))  # the first paragraph
     ap.add_argument("--env", default="tracking")
     ap.add_argument("--timesteps", type=int, default=600_000)
     ap.add_argument("--structures", default=None, help="JSON file: a list of dicts of static recipe keys")
