@@ -102,6 +102,11 @@ def test_sigint_saves_the_run_and_exits_130(interrupted_ppo):
     for f in ("model.zip", "vecnormalize.pkl", "config.json"):
         assert os.path.getsize(os.path.join(out, f)) > 0, f
     assert not [f for f in os.listdir(out) if f.endswith(".tmp")]
+    # the learning curve so far (agents.training.curves.run_curve_callback): tuning episodes, up to the interruption
+    curve = json.load(open(os.path.join(out, "curve.json")))
+    assert curve["seeds"] == [20000, 20001, 20002]
+    steps = [p["env_steps"] for p in curve["points"]]
+    assert steps[0] < CKPT and steps == sorted(set(steps)) and steps[-1] <= cfg["timesteps_done"]
 
 
 def test_evaluate_accepts_a_checkpoint_and_the_interrupted_run(interrupted_ppo, tmp_path, capsys):
@@ -135,6 +140,7 @@ def test_resume_refuses_a_different_configuration(interrupted_ppo, capsys):
 def test_resume_continues_from_the_saved_model_and_normaliser(interrupted_ppo, capsys):
     out = interrupted_ppo[0]
     done = _config(out)["timesteps_done"]
+    curve_before = json.load(open(os.path.join(out, "curve.json")))["points"]
     # the same options as the run (explicitly given) are accepted
     assert main(["train", "--resume", out, "--no-progress", "--env", "tracking", "--algo", "ppo", "--seed", "0",
                  "--timesteps", str(BUDGET), "--hyperparams", PPO_HP]) == 0
@@ -149,6 +155,13 @@ def test_resume_continues_from_the_saved_model_and_normaliser(interrupted_ppo, c
         vn = pickle.load(fh)
     # the statistics continued from the interrupted run's (a fresh normaliser would hold only BUDGET - done)
     assert vn.obs_rms.count >= BUDGET
+    # the learning curve goes on: the points up to the resume point kept, then every BUDGET // 10 steps to the end
+    points = json.load(open(os.path.join(out, "curve.json")))["points"]
+    kept = [p for p in curve_before if p["env_steps"] <= done]
+    assert kept and points[:len(kept)] == kept
+    steps = [p["env_steps"] for p in points]
+    assert steps == sorted(set(steps)) and steps[-1] == cfg["timesteps_done"] and len(points) > len(kept)
+    assert all(np.isfinite(p["cost_ratio"]).all() and len(p["cost_ratio"]) == 3 for p in points)
     # a complete run is not resumed again
     with pytest.raises(SystemExit) as exc:
         main(["train", "--resume", out, "--no-progress"])

@@ -101,7 +101,7 @@ def train_command(args) -> int:
         res = train(env, args.algo, multi_agent=args.multi_agent, timesteps=args.timesteps, seed=args.seed,
                     out=out, tensorboard=args.tensorboard, progress=not args.no_progress,
                     checkpoint_freq=args.checkpoint_freq, hyperparams=args.hyperparams, threads=args.threads,
-                    verbose=args.verbose, hybrid=args.hybrid)
+                    verbose=args.verbose, hybrid=args.hybrid, callbacks=_curve(env, out))
     except TypeError as exc:  # an unknown hyperparameter reaches the SB3 constructor
         if "unexpected keyword argument" in str(exc):
             _usage_error(f"--hyperparams: {exc}")
@@ -113,6 +113,15 @@ def train_command(args) -> int:
     print(f"trained {res.config['algo']}{' (shared)' if res.config['multi_agent'] else ''} on {res.config['env']}: "
           f"{res.config['timesteps']} env steps in {res.seconds:.1f} s -> {res.path}")
     return 0
+
+
+def _curve(env: str, out: str) -> list:
+    """The SB3 run's learning curve (``out/curve.json``, :func:`agents.training.curves.run_curve_callback`) as a
+    callback list: empty for an env that is not one of the tasks."""
+    from ..training.curves import run_curve_callback
+
+    cb = run_curve_callback(env, out)
+    return [] if cb is None else [cb]
 
 
 def _new_run_env(args) -> str:
@@ -243,7 +252,8 @@ def _resume(args) -> int:
                      f"resume with the run's own, or start a new run in another --out)")
     try:
         res = resume(run, progress=not args.no_progress, threads=args.threads, verbose=args.verbose,
-                     tensorboard=args.tensorboard, allow_custom_env=args.allow_custom_env)
+                     tensorboard=args.tensorboard, allow_custom_env=args.allow_custom_env,
+                     callbacks=_curve(env_key(str(cfg["env"])), run))
     except (EnvNameError, RunDirError) as exc:
         _usage_error(f"--resume: {exc}")
     except KeyboardInterrupt as exc:

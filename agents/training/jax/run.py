@@ -36,6 +36,7 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
+from ..curves import CURVE_EPISODES, CURVE_POINTS, CURVE_SEED
 from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
 from ..seeds import TUNING
 from ..train import TrainResult
@@ -45,12 +46,6 @@ from . import ALGOS, LIBRARY, TRAINER
 __all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "run_config", "finish_config", "build_run",
            "RunSetup", "curve_episodes", "TIME_FIELDS", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
 
-#: learning-curve episodes use seeds ``CURVE_SEED + k`` (the tuning range, as the benchmark's curves)
-CURVE_SEED = TUNING.start
-#: learning-curve points after the initial one (fewer when the run has fewer updates)
-CURVE_POINTS = 10
-#: learning-curve episodes per point
-CURVE_EPISODES = 3
 
 
 class JaxRunError(ValueError):
