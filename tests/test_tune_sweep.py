@@ -78,3 +78,14 @@ def test_a_tiny_shared_policy_sweep_scores_through_the_pettingzoo_env(tmp_path):
     _, hps = ippo_config(hp, "tracking", total_timesteps=64)
     for k, v in rec["best"]["floats"].items():
         assert hps[k] == pytest.approx(v, rel=1e-5), k
+    # the file as `agents.tune.compare --multi-agent` and `train --trainer jax --multi-agent --recipe` read it: its
+    # tracking-ma-jax section, not the centralised agent's (which the file lacks)
+    from agents.config.hyperparam_files import HyperparamsError
+    from agents.training.recipes import recipe_file_section
+    from agents.tune.compare import candidate_recipe
+
+    path = str(tmp_path / "best.yml")
+    assert recipe_file_section(path, "tracking", multi_agent=True, trainer="jax") == hp
+    assert ippo_config(candidate_recipe(path, "tracking", multi_agent=True), "tracking", total_timesteps=64)[1] == hps
+    with pytest.raises(HyperparamsError, match="no section 'tracking-jax' or 'dobs_envs/Tracking-v0' or 'default'"):
+        recipe_file_section(path, "tracking", trainer="jax")

@@ -379,7 +379,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     ``recipes``: ``{agent: recipe file}`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``).
     Each adds the agent ``<agent>@recipe`` (:data:`RECIPE_SUFFIX`), trained as ``agent`` with its
     budget's steps, but with the file's section for the env (:func:`agents.training.recipes.recipe_file_section`:
-    the Gymnasium id's, else ``default``; the budget's overrides apply over it as over the shipped
+    a shared-policy agent's ``<env>-ma`` if the file has one, else the Gymnasium id's, else ``default``; the
+    budget's overrides apply over it as over the shipped
     recipe), in its own run directories ``<out>/models/<env>/<budget>/<agent>@recipe/s<seed>``: the
     shipped recipe's runs and the file's stand side by side in one table. ``agents`` may name
     ``<agent>@recipe`` (e.g. to train only the file's runs); otherwise it is added. Raises
@@ -418,7 +419,8 @@ def plan_runs(env: str = "tracking", budget: str = "quick", out: str = "runs/ben
     from ..training.recipes import merge_overrides, recipe_file_section
 
     # the files' sections, read and validated once per env (nothing named in a file is imported)
-    sections = {(k, e): recipe_file_section(f, e) for k, f in recipes.items() for e in env_names}
+    sections = {(k, e): recipe_file_section(f, e, multi_agent=AGENTS[k].multi_agent) for k, f in recipes.items()
+                for e in env_names}
     for (k, e), section in sections.items():
         _check_constructor_keys(k, e, recipes[k], merge_overrides(section, B["hyperparams"].get(AGENTS[k].algo)))
     provenance = {k + RECIPE_SUFFIX: {"agent": k, **recipe_provenance(f)} for k, f in recipes.items()}

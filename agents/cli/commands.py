@@ -146,7 +146,9 @@ def _new_run_env(args) -> str:
         from ..training.recipes import merge_overrides, recipe_file_section
 
         try:
-            args.hyperparams = merge_overrides(recipe_file_section(args.recipe, env), args.hyperparams)
+            section = recipe_file_section(args.recipe, env, multi_agent=args.multi_agent,
+                                          trainer=getattr(args, "trainer", "sb3") or "sb3")
+            args.hyperparams = merge_overrides(section, args.hyperparams)
         except HyperparamsError as exc:
             _usage_error(f"--recipe: {exc}")
     return env

@@ -100,22 +100,27 @@ def recipe_from_hyperparams(algo: str, env_name: str, hp: dict, *, multi_agent: 
                   action_noise_sigma=sigma, hyperparams=hp, action_noise_type=noise_type)
 
 
-def recipe_file_section(path: str, env_name: str) -> dict:
-    """The section of the recipe file ``path`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s ``best.yml``)
-    that rl-zoo3 would read for ``env_name``: its Gymnasium id's section, else ``default``; in
-    :mod:`agents.config.hyperparam_files`'s vocabulary, validated by
+def recipe_file_section(path: str, env_name: str, *, multi_agent: bool = False, trainer: str = "sb3") -> dict:
+    """The section of the recipe file ``path`` (rl-zoo3 format, e.g. ``dobs-envs tune``'s or a sweep's ``best.yml``)
+    for ``env_name``: the agents-only section of the run's kind if the file has one (``<env>-ma-jax`` then
+    ``<env>-ma`` for the jitted shared policy, ``<env>-ma`` for SB3's, ``<env>-jax`` for the jitted centralised
+    agent; what ``python -m agents.tune.sweep --multi-agent`` writes), else what rl-zoo3 would read: its Gymnasium
+    id's section, else ``default``. In :mod:`agents.config.hyperparam_files`'s vocabulary, validated by
     :func:`agents.config.hyperparam_files.read_hyperparams_file` (nothing named in it is imported). Used as
     hyperparameter overrides: a complete section replaces the env's recipe key by key.
     :class:`agents.config.hyperparam_files.HyperparamsError` names the file when no section applies."""
     if not os.path.isfile(path):
         raise HyperparamsError(f"recipe file {path!r} does not exist")
     table = read_hyperparams_file(path)
-    gid = gym_id(env_key(env_name))
-    for name in (gid, "default"):
+    key = env_key(env_name)
+    own = ([f"{key}-ma-jax"] if multi_agent and trainer == "jax" else []) + ([f"{key}-ma"] if multi_agent else []) \
+        + ([f"{key}-jax"] if trainer == "jax" and not multi_agent else [])
+    names = own + [gym_id(key), "default"]
+    for name in names:
         if name in table:
             return table[name]
-    raise HyperparamsError(f"{path} has no section {gid!r} (or 'default') for env {env_name!r}; its sections: "
-                           f"{sorted(map(str, table))}")
+    raise HyperparamsError(f"{path} has no section {' or '.join(map(repr, names))} for env {env_name!r}"
+                           f"{' (shared policy)' if multi_agent else ''}; its sections: {sorted(map(str, table))}")
 
 
 def merge_overrides(base: dict | None, over: dict | None) -> dict:

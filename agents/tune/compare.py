@@ -49,7 +49,8 @@ def candidate_recipe(source: str, env_name: str, multi_agent: bool = False) -> d
     if source in ("sb3", "jax"):
         return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer=source).hyperparams)
     return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer="jax",
-                               overrides=recipe_file_section(source, env_name)).hyperparams)
+                               overrides=recipe_file_section(source, env_name, multi_agent=multi_agent,
+                                                             trainer="jax")).hyperparams)
 
 
 def _p_better(x: np.ndarray, y: np.ndarray) -> float:
