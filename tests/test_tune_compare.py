@@ -1,4 +1,4 @@
-"""Choosing between jitted PPO recipes on the tuning range (agents.tune.compare): candidates' recipes, the record
+"""Choosing between jitted PPO, SAC and TD3 recipes on the tuning range (agents.tune.compare): candidates' recipes, the record
 and its statistics, with the real jitted trainer and the benchmark's harness."""
 from __future__ import annotations
 
@@ -69,12 +69,49 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
     assert exc.value.code == 2
 
 
+def test_off_policy_candidates_are_their_algorithms_recipes(tmp_path):
+    """--algo sac: the shipped candidate is sac.yaml's recipe (which the jitted trainer runs as SBX does), a file's
+    section is merged over it; a shared policy is PPO's only."""
+    sac = dict(resolve_recipe("sac", "tracking").hyperparams)
+    assert candidate_recipe("sb3", "tracking", algo="sac") == candidate_recipe("jax", "tracking", algo="sac") == sac
+    f = tmp_path / "g4.yml"
+    f.write_text(yaml.safe_dump({"dobs_envs/Tracking-v0": {"n_timesteps": 600000, "gradient_steps": 4}}))
+    hp = candidate_recipe(str(f), "tracking", algo="sac")
+    assert hp["gradient_steps"] == 4 and hp["train_freq"] == sac["train_freq"] == 4
+    with pytest.raises(ValueError, match="PPO only"):
+        candidate_recipe("sb3", "tracking", multi_agent=True, algo="sac")
+
+
+def test_a_tiny_sac_comparison_trains_vmapped_seeds_and_scores_them(tmp_path):
+    """Two tiny SAC recipes (learning rates apart) x two seeds x one tuning episode through the real jitted SAC:
+    scores J/J_paper > 0 per seed, the two seeds' runs differ (vmapped keys), the record names the algorithm."""
+    tiny = {"n_envs": 2, "train_freq": 4, "gradient_steps": 1, "batch_size": 16, "buffer_size": 256,
+            "learning_starts": 16}
+    files = {}
+    for name, lr in (("a", 1e-3), ("b", 1e-4)):
+        f = tmp_path / f"{name}.yml"
+        f.write_text(yaml.safe_dump({"dobs_envs/Tracking-v0": {"n_timesteps": 64, **tiny, "learning_rate": lr}}))
+        files[name] = str(f)
+    out = tmp_path / "cmp"
+    rec = compare_recipes("tracking", files, timesteps=64, seeds=[100, 101], episodes=1, out=str(out), algo="sac",
+                          log=lambda *_: None)
+    doc = json.loads((out / "compare.json").read_text())
+    assert doc["algo"] == "sac" and doc["status"] == "complete" and rec["winner"] in "ab"
+    for name, lr in (("a", 1e-3), ("b", 1e-4)):
+        c = doc["candidates"][name]
+        assert c["recipe"]["learning_rate"] == lr and c["recipe"]["gradient_steps"] == 1
+        assert len(c["seed_scores"]) == 2 and all(x > 0 for x in c["seed_scores"])
+        assert c["seed_scores"][0] != c["seed_scores"][1]
+        assert c["cpu_seconds"] > 0
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--candidate", "a=sb3"], "at least two candidates"),
     (["--candidate", "a", "--candidate", "b=jax"], "expected NAME=SOURCE"),
     (["--candidate", "a=sb3", "--candidate", "a=jax"], "given twice"),
     (["--candidate", "a=sb3", "--candidate", "b=/no/such.yml"], "does not exist"),
     (["--candidate", "a=sb3", "--candidate", "b=jax", "--first-seed", "10000"], "--first-seed"),
+    (["--candidate", "a=sb3", "--candidate", "b=jax", "--algo", "sac", "--multi-agent"], "PPO only"),
 ])
 def test_usage_errors_exit_2_with_one_line(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as exc:

@@ -1,4 +1,4 @@
-"""Choose between jitted PPO recipes on the tuning range: each candidate trained with the same fresh training
+"""Choose between jitted PPO, SAC or TD3 recipes on the tuning range: each candidate trained with the same fresh training
 seeds (vmapped, one compiled call per candidate) and scored on the same tuning episodes, as the sweep scores
 its trials (:mod:`agents.tune.sweep`: a run's score is its mean ``J_policy / J_paper`` over the episodes
 ``TUNING.start + k``, never an evaluation seed).
@@ -19,6 +19,11 @@ Candidates (``NAME=SOURCE``):
 ``--multi-agent``: the shared-policy PPO's recipes (``dobs-envs train --multi-agent``'s sections), trained and
 scored as :mod:`agents.tune.sweep` does with ``--multi-agent``.
 
+``--algo sac`` or ``td3``: the off-policy recipes (``agents/config/hyperparams/<algo>.yaml``; the jitted trainer
+runs SB3's / SBX's recipe, so ``sb3`` and ``jax`` name the same one), trained by
+:mod:`agents.training.jax.sac` / ``td3`` vmapped over the seeds, each run's final deterministic policy scored as
+above.
+
 Usage: ``python -m agents.tune.compare --env tracking --candidate sb3=sb3 --candidate jax=jax --first-seed 100
 --seeds 8 --episodes 10 --out runs/compare_tracking`` writes ``compare.json``: per candidate the recipe, the
 per-seed scores, their mean, median and IQM, the CPU time; the winner (lowest mean); and per pair of candidates
@@ -38,17 +43,25 @@ import numpy as np
 from ..stats import iqm, probability_of_improvement
 from ..training.seeds import TUNING, check_episode_seeds, check_training_seeds
 
-__all__ = ["candidate_recipe", "compare_recipes", "main"]
+__all__ = ["ALGOS", "candidate_recipe", "compare_recipes", "main"]
 
 
-def candidate_recipe(source: str, env_name: str, multi_agent: bool = False) -> dict:
-    """The merged hyperparameters of a candidate ``source`` (module doc: ``sb3``, ``jax`` or a recipe file);
-    ``multi_agent``: the shared-policy recipe (``dobs-envs train --multi-agent``'s sections)."""
+#: the algorithms a comparison trains (the jitted trainer's; the shared policy is PPO's only)
+ALGOS = ("ppo", "sac", "td3")
+
+
+def candidate_recipe(source: str, env_name: str, multi_agent: bool = False, algo: str = "ppo") -> dict:
+    """The merged hyperparameters of a candidate ``source`` (module doc: ``sb3``, ``jax`` or a recipe file) of
+    ``algo``; ``multi_agent``: the shared-policy recipe (``dobs-envs train --multi-agent``'s sections)."""
     from ..training.recipes import recipe_file_section, resolve_recipe
 
+    if algo not in ALGOS:
+        raise ValueError(f"--algo {algo!r}: a comparison trains one of {', '.join(ALGOS)}")
+    if multi_agent and algo != "ppo":
+        raise ValueError(f"--multi-agent: the jitted shared policy is trained by PPO only, not {algo}")
     if source in ("sb3", "jax"):
-        return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer=source).hyperparams)
-    return dict(resolve_recipe("ppo", env_name, multi_agent=multi_agent, trainer="jax",
+        return dict(resolve_recipe(algo, env_name, multi_agent=multi_agent, trainer=source).hyperparams)
+    return dict(resolve_recipe(algo, env_name, multi_agent=multi_agent, trainer="jax",
                                overrides=recipe_file_section(source, env_name, multi_agent=multi_agent,
                                                              trainer="jax")).hyperparams)
 
@@ -62,11 +75,52 @@ def _p_better(x: np.ndarray, y: np.ndarray) -> float:
                                       np.nan_to_num(y, nan=big, posinf=big)[:, None])
 
 
+def _run_offpolicy(env_name: str, algo: str, hp: dict, timesteps: int, seeds: list[int], episode_seeds: list[int],
+                   paper: np.ndarray) -> tuple[np.ndarray, dict]:
+    """``(scores (S,), times)`` of the off-policy ``algo`` with the merged recipe ``hp``: the training seeds run
+    vmapped in one compiled call (:func:`agents.training.jax.run.build_run`'s run, as ``dobs-envs train --trainer
+    jax`` builds it), each run's final policy scored by :func:`agents.tune.sweep.score_runs`; ``times`` as
+    :func:`agents.tune.sweep._run_structure`'s."""
+    import time
+
+    import jax
+    import jax.numpy as jnp
+
+    from dobs_envs.registry import ENVIRONMENTS
+
+    from ..config.envs import gym_factory
+    from ..training.jax.export import policy_arrays, select_run
+    from ..training.jax.numpy_policy import NumpyPolicy
+    from ..training.jax.run import build_run, jax_env
+    from .sweep import score_runs
+
+    env_name, gid = jax_env(env_name)
+    if ENVIRONMENTS[env_name].fault_free is not None and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as train_jax)
+    run = build_run(algo, env_name, gid, hp, timesteps)
+    train = run.make_train(run.cfg, run.env, run.env_params)
+    keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
+    c0, w0 = time.process_time(), time.perf_counter()
+    run_all = jax.jit(jax.vmap(train, in_axes=(0, None))).lower(keys, run.hp).compile()
+    c1, w1 = time.process_time(), time.perf_counter()
+    result = jax.device_get(jax.block_until_ready(run_all(keys, run.hp)))
+    times = {"compile_cpu_seconds": c1 - c0, "compile_wall_seconds": w1 - w0,
+             "cpu_seconds": time.process_time() - c1, "wall_seconds": time.perf_counter() - w1}
+    env_np = gym_factory(env_name, {})()
+    policies = [NumpyPolicy.from_arrays(*policy_arrays(select_run(result, i), run.cfg, run.hp, run.env,
+                                                       run.env_params)) for i in range(len(seeds))]
+    scores = score_runs(env_np, policies, episode_seeds, paper)
+    env_np.close()
+    return scores, times
+
+
 def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
-                    dtype: str = "float32", overwrite: bool = False, multi_agent: bool = False, log=print) -> dict:
-    """Train and score every candidate (``name -> source``, module doc) on ``seeds`` and the first ``episodes``
-    tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps the
-    finished ones) and returns the record. ``multi_agent``: the shared-policy PPO (as :mod:`agents.tune.sweep`'s)."""
+                    dtype: str = "float32", overwrite: bool = False, multi_agent: bool = False, algo: str = "ppo",
+                    log=print) -> dict:
+    """Train and score every candidate (``name -> source``, module doc) of ``algo`` on ``seeds`` and the first
+    ``episodes`` tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps
+    the finished ones) and returns the record. ``multi_agent``: the shared-policy PPO (as :mod:`agents.tune.sweep`'s).
+    ``dtype`` is PPO's (an off-policy recipe's run takes the recipe's)."""
     from ..training.curves import paper_costs
     from .sweep import _run_structure, _write_json
 
@@ -80,16 +134,20 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
         raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out or pass "
                               "--overwrite")
     # errors before training
-    recipes = {name: candidate_recipe(src, env_name, multi_agent) for name, src in candidates.items()}
+    recipes = {name: candidate_recipe(src, env_name, multi_agent, algo) for name, src in candidates.items()}
     os.makedirs(out, exist_ok=True)
     paper = paper_costs(env_name, {}, episode_seeds)
-    record = {"env": env_name, "algo": "ppo", "trainer": "jax", "multi_agent": bool(multi_agent),
+    record = {"env": env_name, "algo": algo, "trainer": "jax", "multi_agent": bool(multi_agent),
               "timesteps": int(timesteps), "seeds": seeds,
               "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "candidates": {}, "status": "running"}
     for name, hp in recipes.items():
         log(f"candidate {name} ({candidates[name]}): {len(seeds)} seeds")
-        scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype, multi_agent)
-        s = scores[0]
+        if algo == "ppo":
+            scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype,
+                                           multi_agent)
+            s = scores[0]
+        else:
+            s, times = _run_offpolicy(env_name, algo, hp, timesteps, seeds, episode_seeds, paper)
         finite = s[np.isfinite(s)]
         record["candidates"][name] = {
             "source": candidates[name], "recipe": hp, "seed_scores": s.tolist(), **times,
@@ -110,6 +168,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m agents.tune.compare",
                                  description=" ".join(__doc__.split("\n\n")[0].split()))  # the first paragraph
     ap.add_argument("--env", default="tracking")
+    ap.add_argument("--algo", default="ppo", choices=ALGOS, help="the jitted trainer's algorithm (default ppo)")
     ap.add_argument("--candidate", action="append", default=[], metavar="NAME=SOURCE",
                     help="sb3, jax or a recipe file (module doc); repeat, at least two")
     ap.add_argument("--timesteps", type=int, default=600_000)
@@ -139,7 +198,7 @@ def main(argv=None) -> int:
     try:
         compare_recipes(args.env, candidates, timesteps=args.timesteps,
                         seeds=range(args.first_seed, args.first_seed + args.seeds), episodes=args.episodes,
-                        out=args.out, overwrite=args.overwrite, multi_agent=args.multi_agent)
+                        out=args.out, overwrite=args.overwrite, multi_agent=args.multi_agent, algo=args.algo)
     except (ValueError, FileExistsError, HyperparamsError) as exc:
         ap.error(str(exc))
     return 0

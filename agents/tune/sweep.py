@@ -107,7 +107,6 @@ def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], 
     import jax.numpy as jnp
 
     from ..config.envs import gym_factory, parallel_factory
-    from ..evaluate import run_episode
     from ..training.jax.export import policy_arrays, select_run
     from ..training.jax.numpy_policy import NumpyPolicy
     from ..training.jax.ppo import HPARAMS
@@ -154,14 +153,24 @@ def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], 
     result = jax.block_until_ready(run_all(keys, hps))
     times = {"compile_cpu_seconds": c1 - c0, "compile_wall_seconds": w1 - w0,
              "cpu_seconds": time.process_time() - c1, "wall_seconds": time.perf_counter() - w1}
-    scores = np.empty(P * S)
-    for i in range(P * S):
-        pol = policy(select_run(result, i), {k: float(hps[k][i]) for k in HPARAMS})
-        costs = np.array([run_episode(env_np, pol, s, parallel=multi_agent).cost for s in episode_seeds])
-        ratio = costs / paper
-        scores[i] = float(np.mean(ratio)) if np.all(np.isfinite(ratio)) else math.inf
+    scores = score_runs(env_np, [policy(select_run(result, i), {k: float(hps[k][i]) for k in HPARAMS})
+                                 for i in range(P * S)], episode_seeds, paper, parallel=multi_agent)
     env_np.close()
     return scores.reshape(P, S), times
+
+
+def score_runs(env_np, policies: list, episode_seeds: list[int], paper: np.ndarray, *,
+               parallel: bool = False) -> np.ndarray:
+    """Each policy's score (module doc): its mean ``J_policy / J_paper`` over ``episode_seeds`` with the
+    benchmark's harness (:func:`agents.evaluate.run_episode`) on ``env_np``; ``inf`` if an episode diverged."""
+    from ..evaluate import run_episode
+
+    scores = np.empty(len(policies))
+    for i, pol in enumerate(policies):
+        costs = np.array([run_episode(env_np, pol, s, parallel=parallel).cost for s in episode_seeds])
+        ratio = costs / paper
+        scores[i] = float(np.mean(ratio)) if np.all(np.isfinite(ratio)) else math.inf
+    return scores
 
 
 def run_sweep(env_name: str, *, timesteps: int, structures: list[dict] | None = None, draws: int = 16,
