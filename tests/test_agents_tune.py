@@ -1,12 +1,15 @@
 """``dobs-envs tune`` (agents/tune/) on a real local Ray (``ray.init(num_cpus=2)``), real Optuna and
 ASHA: a 3-trial study of a few hundred env steps writes trials.csv/png and a best.yml that ``train``
 accepts; every episode a trial is scored on is a tuning episode, never an evaluation one; an
-interrupted study (SIGINT, Tune's own Ctrl-C handling) resumes without running finished trials again."""
+interrupted study (SIGINT, Tune's own Ctrl-C handling) resumes without running finished trials again, from its own
+JSON records: no pickle in the study directory is ever loaded."""
 from __future__ import annotations
 
 import hashlib
 import json
+import glob
 import os
+import pickle
 import signal
 from dataclasses import asdict
 
@@ -21,7 +24,7 @@ from agents.config.hyperparam_files import read_hyperparams_file  # noqa: E402
 from agents.training.recipes import resolve_recipe  # noqa: E402
 from agents.training.seeds import EVALUATION, TRAINING, TUNING  # noqa: E402
 from agents.tune.space import SearchSpace  # noqa: E402
-from agents.tune.spec import StudySpec  # noqa: E402
+from agents.tune.spec import StudyDirError, StudySpec  # noqa: E402
 from agents.tune.study import run_study  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 
@@ -111,9 +114,19 @@ def test_train_accepts_the_best_recipe(study, tmp_path):
     assert cfg["status"] == "complete"
 
 
+class _Payload:
+    """Unpickling it writes the file ``path`` (what a hostile pickle in a study directory could do)."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
 class _InterruptAfterFirstTrial:
     """A Tune callback sending the driver a real SIGINT (Ctrl-C) when the first trial finishes (once: a
-    marker file, since Tune stores its callbacks with the experiment and a resumed study has them again)."""
+    marker file)."""
 
     def __new__(cls, marker):
         from ray.tune import Callback
@@ -141,8 +154,33 @@ def test_an_interrupted_study_resumes_without_repeating_finished_trials(local_ra
 
     before = {r["trial_id"]: history(r) for r in done}
     assert all(before[r["trial_id"]][1] is not None for r in done if r["status"] == "complete")
+    # the directory is the user's to give: every pickle Tune left in it (its experiment state, the searcher's) is
+    # replaced by one that would leave a marker file if it were unpickled; Tune's JSON state by one that names a
+    # cloudpickle payload. A resume reads none of them.
+    marker = tmp_path / "unpickled"
+    payload = pickle.dumps(_Payload(str(marker)))
+    pkls = glob.glob(os.path.join(out, "study", "*.pkl"))
+    assert pkls  # Tune wrote some: the test replaces real files
+    for f in pkls:
+        with open(f, "wb") as fh:
+            fh.write(payload)
+    for f in glob.glob(os.path.join(out, "study", "experiment_state*.json")):
+        with open(f, "w") as fh:
+            json.dump({"_type": "CLOUDPICKLE_FALLBACK", "value": payload.hex()}, fh)
+    with open(os.path.join(out, "study", "trials.jsonl"), "a") as fh:
+        fh.write('{"event": "complete", "trial_')  # a torn last line (a study killed while writing) is skipped
     res2 = run_study(SPEC, out, resume=True, progress=False)
+    assert not marker.exists()
     assert res2.complete and len(res2.rows) == 3
+    # an unfinished trial runs again with its own values, as a new trial; the table leaves the old one out
+    with open(os.path.join(out, "study", "trials.jsonl")) as fh:
+        events = [json.loads(line) for line in fh if line.strip().endswith("}")]
+    configs = {e["trial_id"]: e["config"] for e in events if e["event"] == "start"}
+    ids = {r["trial_id"] for r in res2.rows}
+    for r in res.rows:
+        if r["status"] == "unfinished":
+            assert r["trial_id"] not in ids
+            assert any(configs[i] == configs[r["trial_id"]] for i in ids - set(before))
     assert os.path.exists(os.path.join(out, "best.yml"))
     index = {r["trial_id"]: r["trial"] for r in res2.rows}
     assert all(index[r["trial_id"]] == r["trial"] for r in done)  # rows keep the order the trials were created
@@ -201,6 +239,11 @@ def test_cli_usage_errors(tmp_path, capsys):
     (occupied / "study").mkdir()
     err = _exit2(["tune", "--out", str(occupied), "--resume", "--algo", "sac"], capsys)
     assert "--algo sac (the study has ppo)" in err
+    with pytest.raises(StudyDirError, match="before its first trial started"):  # the same study, no trial log
+        run_study(SPEC, str(occupied), resume=True, progress=False)
+    (occupied / "study" / "trial_0123abcd").mkdir()  # trials but no log: never resumed from Tune's pickles
+    with pytest.raises(StudyDirError, match="not resumed from Ray Tune's pickled state"):
+        run_study(SPEC, str(occupied), resume=True, progress=False)
     err = _exit2(["tune", "--out", str(tmp_path / "n"), "--hyperparams", '{"n_stepz": 8}'], capsys)
     assert "PPO takes no argument(s) ['n_stepz']" in err
     assert not os.path.exists(tmp_path / "n")

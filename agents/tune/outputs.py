@@ -9,50 +9,91 @@ import os
 
 from ..config.envs import gym_id
 from ..training.seeds import EVALUATION, TUNING
-from .spec import EXPERIMENT, METRIC, StudySpec, read_study_json, stored_spec
+from .spec import EXPERIMENT, METRIC, TRIAL_LOG, StudySpec, read_study_json, stored_spec
 
-__all__ = ["trials_table", "recipe_section", "write_best_recipe", "write_outputs"]
+__all__ = ["read_trial_log", "trials_table", "recipe_section", "write_best_recipe", "write_outputs"]
+
+
+def read_trial_log(out: str) -> list[dict]:
+    """The events of the study's trial log (``study/trials.jsonl``, :data:`~agents.tune.spec.TRIAL_LOG`), in the order
+    they were written: dicts with ``event`` (``start``, ``complete``, ``error``, ``superseded``) and ``trial_id``; a
+    start also has ``path`` (the trial's directory relative to ``out``) and ``config`` (its searched values). Plain
+    JSON only; a line that is not such an object (a torn last line of a killed study) is skipped."""
+    events = []
+    try:
+        with open(os.path.join(out, EXPERIMENT, TRIAL_LOG)) as fh:
+            lines = fh.readlines()
+    except OSError:
+        return events
+    for line in lines:
+        try:
+            e = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(e, dict) and isinstance(e.get("event"), str) and isinstance(e.get("trial_id"), str):
+            events.append(e)
+    return events
+
+
+def _last_result(trial_dir: str) -> dict:
+    """The trial's last report: the last JSON object of Tune's ``result.json`` (one per line), ``{}`` if none."""
+    last = {}
+    try:
+        with open(os.path.join(trial_dir, "result.json")) as fh:
+            for line in fh:
+                try:
+                    r = json.loads(line)
+                except ValueError:
+                    continue
+                if isinstance(r, dict):
+                    last = r
+    except OSError:
+        pass
+    return last
 
 
 def trials_table(out: str) -> list[dict]:
-    """One row per trial of the study in ``out``, in the order the trials were created: ``trial``,
-    ``trial_id``, ``status`` (complete: trained the whole budget; stopped early: by ASHA; error;
-    unfinished: not yet finished when the study was interrupted), ``env_steps`` reached, the last
-    ``score``, ``seconds``, the trial's directory and its searched values."""
-    from ray.tune import ExperimentAnalysis
-
-    import logging
-
+    """One row per trial of the study in ``out``, in the order the trials started: ``trial``, ``trial_id``,
+    ``status`` (complete: trained the whole budget; stopped early: by ASHA; error; unfinished: not yet finished
+    when the study was interrupted or killed), ``env_steps`` reached, the last ``score``, ``seconds``, the trial's
+    directory and its searched values. Read from the study's trial log and each trial's ``result.json`` (JSON
+    only: Tune's pickled experiment state is never read); a trial superseded by a resume (it was unfinished and
+    ran again as a new trial) is left out."""
     spec = stored_spec(out)
-    quiet = logging.getLogger("ray.tune.analysis")  # "Failed to fetch metrics" of trials that never reported
-    level = quiet.level
-    quiet.setLevel(logging.ERROR)
-    try:
-        analysis = ExperimentAnalysis(os.path.join(out, EXPERIMENT))
-    finally:
-        quiet.setLevel(level)
-    # in the order Tune created them (its experiment tag starts with that counter; a restored experiment
-    # lists them in another order)
-    trials = sorted(analysis.trials, key=lambda t: int(str(t.experiment_tag).split("_")[0] or 0))
+    exp = os.path.realpath(os.path.join(out, EXPERIMENT))
+    trials, order = {}, []
+    for e in read_trial_log(out):
+        tid = e["trial_id"]
+        if e["event"] == "start" and tid not in trials:
+            path = os.path.realpath(os.path.join(out, str(e.get("path", ""))))
+            if os.path.dirname(path) != exp or not isinstance(e.get("config"), dict):
+                continue  # not a trial directory of this study: never read
+            trials[tid] = {"path": path, "config": e["config"], "end": None}
+            order.append(tid)
+        elif tid in trials and e["event"] in ("complete", "error", "superseded"):
+            trials[tid]["end"] = e["event"]
     rows = []
-    for i, t in enumerate(trials):
-        last = t.last_result or {}
+    for tid in order:
+        t = trials[tid]
+        if t["end"] == "superseded":
+            continue
+        last = _last_result(t["path"])
         steps = last.get("env_steps")
-        if t.status == "ERROR":
+        if t["end"] == "error":
             status = "error"
-        elif t.status != "TERMINATED":
-            status = "unfinished"
         elif steps is not None and int(steps) >= spec.timesteps:
             status = "complete"
-        else:
+        elif t["end"] == "complete":
             status = "stopped early"
+        else:
+            status = "unfinished"
         score = last.get(METRIC)
-        rows.append({"trial": i, "trial_id": t.trial_id, "status": status,
+        rows.append({"trial": len(rows), "trial_id": tid, "status": status,
                      "env_steps": int(steps) if steps is not None else None,
                      METRIC: float(score) if score is not None else None,
                      "seconds": round(float(last.get("time_total_s", 0.0)), 1),
-                     "path": os.path.relpath(t.path, out),
-                     **{k: v for k, v in sorted(t.config.items())}})
+                     "path": os.path.relpath(t["path"], os.path.realpath(out)),
+                     **{k: v for k, v in sorted(t["config"].items())}})
     return rows
 
 
@@ -122,10 +163,13 @@ def recipe_section(hp: dict) -> dict:
     return sec
 
 
-def write_best_recipe(path: str, spec: StudySpec, best: dict, rows: list[dict], *, baseline: bool = False) -> None:
+def write_best_recipe(path: str, spec: StudySpec, best: dict, rows: list[dict], *, baseline: dict | None = None) -> None:
     """``best.yml``: the best trial's run hyperparameters as the rl-zoo3 section of the env's Gymnasium
-    id, with a comment header (env, algorithm, trials, score, seeds)."""
+    id, with a comment header (env, algorithm, trials, score, seeds; ``baseline``: the recipe's own searched values,
+    whose trial the header quotes)."""
     import yaml
+
+    base = next((r for r in rows if baseline and all(r.get(k) == v for k, v in baseline.items())), None)
 
     with open(os.path.join(os.path.dirname(path), best["path"], "run", "config.json")) as fh:
         hp = json.load(fh)["hyperparams"]
@@ -141,9 +185,10 @@ def write_best_recipe(path: str, spec: StudySpec, best: dict, rows: list[dict], 
         f"{seeds[0]}-{seeds[-1]} ({TUNING}; the {EVALUATION} was not used), after {spec.timesteps} env steps, "
         f"training seed {spec.seed}",
         f"# best trial {best['trial']} ({best['trial_id']}); "
-        + (f"trial 0 (the recipe before tuning): {rows[0][METRIC]:.4g} ({rows[0]['status']})"
-           if baseline and rows and rows[0][METRIC] is not None else "the recipe before tuning lies outside the "
-                                                                      "search space (not a trial)"),
+        + (f"trial {base['trial']} (the recipe before tuning): {base[METRIC]:.4g} ({base['status']})"
+           if base is not None and base[METRIC] is not None else
+           "the recipe before tuning lies outside the search space (not a trial)" if not baseline else
+           "the recipe before tuning did not finish"),
         f"# use: dobs-envs train --env {spec.env} --algo {spec.algo} --recipe {os.path.basename(path)}; or replace "
         f"the {gym_id(spec.env)} section of agents/config/hyperparams/{spec.algo}.yaml with it "
         f"(the benchmark's recipe)",
@@ -163,6 +208,6 @@ def write_outputs(out: str, spec: StudySpec, rows: list[dict], *, complete: bool
     finished = [r for r in rows if r["status"] == "complete" and r[METRIC] is not None]
     if complete and finished:
         write_best_recipe(os.path.join(out, "best.yml"), spec, min(finished, key=lambda r: r[METRIC]), rows,
-                          baseline=read_study_json(out).get("baseline") is not None)
+                          baseline=read_study_json(out).get("baseline"))
         files.append("best.yml")
     return [os.path.join(out, f) for f in files]

@@ -11,7 +11,7 @@ from ..config.hyperparam_files import ALGOS
 from ..training.seeds import EVALUATION, TUNING, check_episode_seeds, check_training_seeds
 
 __all__ = ["StudySpec", "StudyDirError", "stored_spec", "read_study_json", "assert_tuning_only", "METRIC",
-           "STUDY_FILES", "EXPERIMENT"]
+           "STUDY_FILES", "EXPERIMENT", "TRIAL_LOG"]
 
 
 #: the reported score (lower is better): mean J_policy / J_paper over the tuning episodes
@@ -19,6 +19,9 @@ METRIC = "score"
 #: the entries :func:`run_study` writes in its output directory
 STUDY_FILES = ("study.json", "study", "trials.csv", "trials.png", "best.yml")
 EXPERIMENT = "study"
+#: the study's own record of its trials, inside ``EXPERIMENT``: one JSON object per line, appended by the driver as
+#: Tune starts and ends a trial (plain JSON: what the table and a resume read instead of Tune's pickled state)
+TRIAL_LOG = "trials.jsonl"
 
 
 class StudyDirError(ValueError):

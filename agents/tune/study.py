@@ -31,8 +31,16 @@ Output directory ``out``
   header (env, algorithm, trials, score, seeds). ``dobs-envs train --recipe best.yml`` trains with
   it; pasted over that section of ``agents/config/hyperparams/<algo>.yaml`` it becomes the benchmark's recipe.
 
-An interrupted study (Ctrl-C: Tune saves its state; finished trials are kept) continues with
-``resume=True`` (``Tuner.restore``): finished trials are not run again, unfinished ones restart.
+An interrupted study (Ctrl-C, or a killed process: finished trials are kept) continues with ``resume=True``
+from its own plain-JSON records, never from Tune's pickled experiment state (``Tuner.restore`` would unpickle
+whatever the directory holds): the trial log ``study/trials.jsonl`` (:data:`~agents.tune.spec.TRIAL_LOG`, written
+by the driver as trials start and end) and each trial's ``result.json``. Finished trials (complete, stopped early,
+failed) are not run again: they are given to a new Optuna sampler as evaluated points, and a new Tune run in the
+same experiment directory runs the remaining trials, the unfinished ones first with their own values (each as a
+new trial; the unfinished one is marked superseded and left out of the table). ASHA starts the resumed run with
+empty rungs (its comparisons at a milestone are between the trials of the resumed run), and the sampler's seed
+is the study's seed mixed with the number of finished trials (so that its start-up draws differ from the first
+run's).
 """
 from __future__ import annotations
 
@@ -48,7 +56,7 @@ import numpy as np
 from ..config.envs import gym_id
 from .outputs import trials_table, write_outputs
 from .space import SearchSpace
-from .spec import (EXPERIMENT, METRIC, STUDY_FILES, StudyDirError, StudySpec, assert_tuning_only,
+from .spec import (EXPERIMENT, METRIC, STUDY_FILES, TRIAL_LOG, StudyDirError, StudySpec, assert_tuning_only,
                    read_study_json)
 
 __all__ = ["run_study", "StudyResult", "check_constructor_keys", "REDUCTION_FACTOR"]
@@ -153,17 +161,15 @@ def _trial(config: dict, spec: StudySpec) -> None:
 class _Progress:
     """Ray Tune callback: a progress bar over finished trials (with the best score so far)."""
 
-    def __new__(cls, total: int):
+    def __new__(cls, total: int, done: int = 0):
         from ray.tune import Callback
 
         class _Bar(Callback):
-            dobs_envs_progress = True  # what run_study replaces in a restored experiment
-
             def __init__(self):
-                self.total, self.bar = total, None
+                self.total, self.done, self.bar = total, done, None
 
-            def __getstate__(self):  # Tune pickles its callbacks with the experiment
-                return {"total": self.total, "bar": None}
+            def __getstate__(self):  # Tune pickles its callbacks with the experiment (never read back)
+                return {"total": self.total, "done": self.done, "bar": None}
 
             def _update(self, trials):
                 from tqdm.auto import tqdm
@@ -173,7 +179,7 @@ class _Progress:
                 done = [t for t in trials if t.status in ("TERMINATED", "ERROR")]
                 scores = [t.last_result.get(METRIC) for t in done if t.last_result]
                 scores = [s for s in scores if isinstance(s, (int, float))]
-                self.bar.n = len(done)
+                self.bar.n = self.done + len(done)
                 if scores:
                     self.bar.set_postfix_str(f"best score {min(scores):.3g}", refresh=False)
                 self.bar.refresh()
@@ -191,6 +197,75 @@ class _Progress:
                     self.bar = None
 
         return _Bar()
+
+
+def _plain(x):
+    """A searched value as plain JSON (numpy scalars as Python numbers)."""
+    return x.item() if hasattr(x, "item") else x
+
+
+def _log_event(out: str, event: str, trial_id: str, **fields) -> None:
+    """Append one event to the study's trial log, on a line of its own (after a torn last line too), flushed."""
+    path = os.path.join(out, EXPERIMENT, TRIAL_LOG)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "a+b") as fh:
+        fh.seek(0, os.SEEK_END)
+        torn = fh.tell() > 0 and (fh.seek(-1, os.SEEK_END), fh.read(1))[1] != b"\n"
+        line = json.dumps({"event": event, "trial_id": str(trial_id), **fields}) + "\n"
+        fh.write((b"\n" if torn else b"") + line.encode())
+
+
+class _TrialLog:
+    """Ray Tune callback (in the driver): appends a line to the study's trial log as Tune starts a trial
+    (its id, directory and searched values) and as it ends one (``complete``: finished or stopped by ASHA;
+    ``error``), flushed at once so that a killed study keeps it (:func:`agents.tune.outputs.read_trial_log`)."""
+
+    def __new__(cls, out: str):
+        from ray.tune import Callback
+
+        class _Log(Callback):
+            def _write(self, trial, event: str, **fields):
+                _log_event(out, event, trial.trial_id, **fields)
+
+            def on_trial_start(self, iteration, trials, trial, **info):
+                self._write(trial, "start", path=os.path.relpath(trial.path, out),
+                            config={k: _plain(v) for k, v in trial.config.items()})
+
+            def on_trial_complete(self, iteration, trials, trial, **info):
+                self._write(trial, "complete")
+
+            def on_trial_error(self, iteration, trials, trial, **info):
+                self._write(trial, "error")
+
+        return _Log()
+
+
+def _resumed_searcher(spec: StudySpec, space, out: str, rows: list[dict]):
+    """The Optuna sampler of a resumed study (module doc): an Optuna study told the finished trials (each asked
+    with its own values enqueued, through the search space, then told its score: Optuna's ask-and-tell), the
+    unfinished ones first to run again (each marked superseded in the trial log). Returns ``(searcher, number of
+    finished trials)``."""
+    import optuna
+    from ray.tune.search.optuna import OptunaSearch
+
+    names = [n for n, _, _ in space.params()]
+    done = [r for r in rows if r["status"] != "unfinished"]
+    redo = [r for r in rows if r["status"] == "unfinished"]
+    seed = int(np.random.SeedSequence([spec.seed, len(done)]).generate_state(1)[0] % (2 ** 31))
+    storage, name = optuna.storages.InMemoryStorage(), "dobs-envs-tune"
+    study = optuna.create_study(storage=storage, study_name=name, direction="minimize")
+    for r in done:
+        study.enqueue_trial({n: r[n] for n in names})
+        trial = study.ask()
+        space(trial)  # suggests the enqueued values: the trial records them with their distributions
+        failed = r["status"] == "error" or r[METRIC] is None
+        study.tell(trial, None if failed else r[METRIC],
+                   state=optuna.trial.TrialState.FAIL if failed else optuna.trial.TrialState.COMPLETE)
+    searcher = OptunaSearch(space=space, metric=METRIC, mode="min", seed=seed, storage=storage, study_name=name,
+                            points_to_evaluate=[{n: r[n] for n in names} for r in redo] or None)
+    for r in redo:
+        _log_event(out, "superseded", r["trial_id"])
+    return searcher, len(done)
 
 
 @dataclass
@@ -215,15 +290,18 @@ def _claim(out: str, spec: StudySpec, *, resume: bool, overwrite: bool) -> None:
         stored = read_study_json(out).get("spec")
         if not stored or not os.path.isdir(os.path.join(out, EXPERIMENT)):
             raise StudyDirError(f"{out!r} holds no study to resume (study.json and study/ of dobs-envs tune)")
-        from ray.tune import Tuner
-
-        if not Tuner.can_restore(os.path.join(out, EXPERIMENT)):
-            raise StudyDirError(f"{out!r}: the study stopped before Ray Tune saved its state; nothing to resume "
-                                f"(start it again with --overwrite)")
         mine = json.loads(json.dumps(asdict(spec)))
         diff = [f"{k} {mine[k]!r} (the study has {stored.get(k)!r})" for k in mine if stored.get(k) != mine[k]]
         if diff:
             raise StudyDirError(f"{out!r}: the study's definition differs: {'; '.join(diff)}")
+        if not os.path.isfile(os.path.join(out, EXPERIMENT, TRIAL_LOG)):
+            if any(e.startswith("trial_") for e in os.listdir(os.path.join(out, EXPERIMENT))):
+                raise StudyDirError(f"{out!r}: the study has no trial log ({EXPERIMENT}/{TRIAL_LOG}: studies started "
+                                    f"before the trial log existed have none) and is not resumed from Ray Tune's pickled state; its "
+                                    f"trials' reports are in {EXPERIMENT}/trial_*/result.json (start it again with "
+                                    f"--overwrite, or in another directory)")
+            raise StudyDirError(f"{out!r}: the study stopped before its first trial started (no {EXPERIMENT}/"
+                                f"{TRIAL_LOG}); nothing to resume (start it again with --overwrite)")
         return
     if entries and not overwrite:
         what = ("a tuning study" if "study.json" in entries else
@@ -246,8 +324,8 @@ def run_study(spec: StudySpec, out: str, *, resume: bool = False, overwrite: boo
     Ray: an already initialised Ray is used as it is; else ``address`` joins a cluster
     (``ray.init(address=...)``) or a local Ray of ``cpus`` CPUs (default: the machine's) starts and is
     shut down at the end, also on Ctrl-C. Each trial takes ``spec.cpus_per_trial`` CPUs (and as many
-    torch threads). ``callbacks``: more Ray Tune callbacks (stored with the experiment: a resumed study
-    keeps the first run's). Returns a :class:`StudyResult`; ``complete`` is False after an interruption (the
+    torch threads). ``callbacks``: more Ray Tune callbacks, for this call (a resumed study runs with the
+    callbacks its own call gives). Returns a :class:`StudyResult`; ``complete`` is False after an interruption (the
     finished trials are kept and ``resume=True`` continues).
     """
     import ray
@@ -277,31 +355,25 @@ def run_study(spec: StudySpec, out: str, *, resume: bool = False, overwrite: boo
         ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False, **kw)
         started = True
     t0 = time.perf_counter()
-    exp = os.path.join(out, EXPERIMENT)
     try:
         trainable = tune.with_resources(tune.with_parameters(_trial, spec=spec), {"cpu": spec.cpus_per_trial})
+        done = 0
         if resume:
-            tuner = tune.Tuner.restore(exp, trainable, resume_unfinished=True, resume_errored=False)
-            # Tune restores the callbacks stored with the experiment: this call's progress choice replaces
-            # the stored bar (Tune's private attribute; left alone if a Ray version lacks it)
-            run_config = getattr(getattr(tuner, "_local_tuner", None), "_run_config", None)
-            if run_config is not None:
-                kept = [cb for cb in (run_config.callbacks or []) if not getattr(cb, "dobs_envs_progress", False)]
-                run_config.callbacks = ([_Progress(spec.trials)] if progress else []) + kept
+            searcher, done = _resumed_searcher(spec, space, out, trials_table(out))
         else:
             searcher = OptunaSearch(space=space, metric=METRIC, mode="min", seed=spec.seed,
                                     points_to_evaluate=[baseline] if baseline else None)
+        if done < spec.trials:  # a resumed study whose trials all finished runs none
             scheduler = ASHAScheduler(time_attr="env_steps", metric=METRIC, mode="min", max_t=spec.timesteps,
                                       grace_period=max(1, spec.timesteps // REDUCTION_FACTOR ** 2),
                                       reduction_factor=REDUCTION_FACTOR)
+            cbs = [_TrialLog(out)] + ([_Progress(spec.trials, done)] if progress else []) + list(callbacks or [])
             tuner = tune.Tuner(
                 trainable,
-                tune_config=tune.TuneConfig(search_alg=searcher, scheduler=scheduler, num_samples=spec.trials,
+                tune_config=tune.TuneConfig(search_alg=searcher, scheduler=scheduler, num_samples=spec.trials - done,
                                             trial_dirname_creator=_trial_dirname),
-                run_config=tune.RunConfig(name=EXPERIMENT, storage_path=out, verbose=0,
-                                          callbacks=([_Progress(spec.trials)] if progress else [])
-                                          + list(callbacks or [])))
-        tuner.fit()
+                run_config=tune.RunConfig(name=EXPERIMENT, storage_path=out, verbose=0, callbacks=cbs))
+            tuner.fit()
     finally:
         if started:
             ray.shutdown()
