@@ -33,7 +33,6 @@ is better, ties counted half).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -86,17 +85,14 @@ def _run_offpolicy(env_name: str, algo: str, hp: dict, timesteps: int, seeds: li
     import jax
     import jax.numpy as jnp
 
-    from dobs_envs.registry import ENVIRONMENTS
-
     from ..config.envs import gym_factory
     from ..training.jax.export import policy_arrays, select_run
     from ..training.jax.numpy_policy import NumpyPolicy
-    from ..training.jax.run import build_run, jax_env
+    from ..training.jax.run import build_run, enable_x64_for, jax_env
     from .sweep import score_runs
 
     env_name, gid = jax_env(env_name)
-    if ENVIRONMENTS[env_name].fault_free is not None and not jax.config.jax_enable_x64:
-        jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as train_jax)
+    enable_x64_for(env_name)
     run = build_run(algo, env_name, gid, hp, timesteps)
     train = run.make_train(run.cfg, run.env, run.env_params)
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])

@@ -14,40 +14,36 @@ from .spec import EXPERIMENT, METRIC, TRIAL_LOG, StudySpec, read_study_json, sto
 __all__ = ["read_trial_log", "trials_table", "recipe_section", "write_best_recipe", "write_outputs"]
 
 
+def _json_objects(path: str):
+    """The JSON objects of a file of one JSON value per line, in order; a line that is not a JSON object (a torn
+    last line of a killed writer) is skipped; nothing if the file cannot be read."""
+    try:
+        with open(path) as fh:
+            lines = fh.readlines()
+    except OSError:
+        return
+    for line in lines:
+        try:
+            obj = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(obj, dict):
+            yield obj
+
+
 def read_trial_log(out: str) -> list[dict]:
     """The events of the study's trial log (``study/trials.jsonl``, :data:`~agents.tune.spec.TRIAL_LOG`), in the order
     they were written: dicts with ``event`` (``start``, ``complete``, ``error``, ``superseded``) and ``trial_id``; a
     start also has ``path`` (the trial's directory relative to ``out``) and ``config`` (its searched values). Plain
     JSON only; a line that is not such an object (a torn last line of a killed study) is skipped."""
-    events = []
-    try:
-        with open(os.path.join(out, EXPERIMENT, TRIAL_LOG)) as fh:
-            lines = fh.readlines()
-    except OSError:
-        return events
-    for line in lines:
-        try:
-            e = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(e, dict) and isinstance(e.get("event"), str) and isinstance(e.get("trial_id"), str):
-            events.append(e)
-    return events
+    return [e for e in _json_objects(os.path.join(out, EXPERIMENT, TRIAL_LOG))
+            if isinstance(e.get("event"), str) and isinstance(e.get("trial_id"), str)]
 
 
 def _last_result(trial_dir: str) -> dict:
     """The trial's last report: the last JSON object of Tune's ``result.json`` (one per line), ``{}`` if none."""
     last = {}
-    try:
-        with open(os.path.join(trial_dir, "result.json")) as fh:
-            for line in fh:
-                try:
-                    r = json.loads(line)
-                except ValueError:
-                    continue
-                if isinstance(r, dict):
-                    last = r
-    except OSError:
+    for last in _json_objects(os.path.join(trial_dir, "result.json")):
         pass
     return last
 

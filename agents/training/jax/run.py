@@ -44,7 +44,7 @@ from ..xla import xla_threads
 from . import ALGOS, LIBRARY, TRAINER
 
 __all__ = ["train_jax", "JaxRunError", "jax_env", "curve_updates", "run_config", "finish_config", "build_run",
-           "RunSetup", "curve_episodes", "TIME_FIELDS", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
+           "enable_x64_for", "RunSetup", "curve_episodes", "TIME_FIELDS", "CURVE_SEED", "CURVE_POINTS", "CURVE_EPISODES"]
 
 
 
@@ -146,6 +146,18 @@ class RunSetup(NamedTuple):
     fields: dict
 
 
+def enable_x64_for(env: str) -> None:
+    """Switch ``jax_enable_x64`` on for the process if ``env`` has communication faults on by default
+    (tracking_lossy): the JAX envs draw them with 64-bit integers (docs/jax.md); a run still simulates and trains
+    in float32 (its config's dtype)."""
+    import jax
+
+    from dobs_envs.registry import ENVIRONMENTS
+
+    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+
+
 def build_run(algo: str, env: str, gid: str, hyperparams: dict | None, timesteps: int | None) -> RunSetup:
     """The centralised ``algo`` run of ``env`` (Gymnasium id ``gid``) from its recipe
     (:func:`agents.training.recipes.resolve_recipe` with the overrides ``hyperparams``; ``timesteps`` default the
@@ -228,18 +240,13 @@ def train_jax(env: str, algo: str = "ppo", *, timesteps: int | None = None, seed
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     import jax
 
-    from dobs_envs.registry import ENVIRONMENTS
-
     from .export import save_policy
 
     def say(msg: str) -> None:
         if progress:
             print(f"[jax {algo} {env}] {msg}", file=sys.stderr, flush=True)
 
-    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
-        # communication faults on by default (tracking_lossy): the JAX envs draw them with 64-bit integers
-        # (docs/jax.md); the run still simulates and trains in float32 (the config's dtype)
-        jax.config.update("jax_enable_x64", True)
+    enable_x64_for(env)
     run = build_run(algo, env, gid, hyperparams, timesteps)
     cfg, hp, env_jax, env_params = run.cfg, run.hp, run.env, run.env_params
     updates = curve_updates(cfg.n_updates, curve_points)

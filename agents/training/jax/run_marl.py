@@ -29,8 +29,8 @@ from ..runs import clear_run, write_json_atomic
 from ..train import TrainResult
 from ..xla import xla_threads
 from . import TRAINER
-from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, finish_config, jax_env,
-                  run_config)
+from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, enable_x64_for, finish_config,
+                  jax_env, run_config)
 
 __all__ = ["train_jax_marl", "shared_export", "build_marl_run", "MarlSetup", "MARL_ALGOS"]
 
@@ -147,8 +147,6 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     import jax
 
-    from dobs_envs.registry import ENVIRONMENTS
-
     from .export import save_policy
     from .ippo import make_train
 
@@ -156,8 +154,7 @@ def train_jax_marl(env: str, algo: str = "ppo", *, timesteps: int | None = None,
         if progress:
             print(f"[jax ppo shared {env}] {msg}", file=sys.stderr, flush=True)
 
-    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
-        jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as .run.train_jax)
+    enable_x64_for(env)
     run = build_marl_run(algo, env, gid, hyperparams, timesteps)
     cfg, hp, layout = run.cfg, run.hp, run.layout
     p = cfg.ppo

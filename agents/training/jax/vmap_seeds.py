@@ -46,8 +46,8 @@ from ..runs import clear_run, write_json_atomic
 from ..train import TrainResult
 from ..xla import xla_threads
 from . import ALGOS
-from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, finish_config, jax_env,
-                  run_config)
+from .run import (CURVE_POINTS, JaxRunError, _plain, curve_episodes, curve_updates, enable_x64_for, finish_config,
+                  jax_env, run_config)
 
 __all__ = ["train_jax_seeds", "VmapRun", "BUILDERS", "SHARED_TIMES"]
 
@@ -164,8 +164,6 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
     import jax
     import jax.numpy as jnp
 
-    from dobs_envs.registry import ENVIRONMENTS
-
     n = len(seeds)
     tag = f"[jax {algo}{' shared' if multi_agent else ''} {env}, {n} seeds vmapped]"
 
@@ -173,8 +171,7 @@ def train_jax_seeds(env: str, algo: str = "ppo", *, multi_agent: bool = False, s
         if progress:
             print(f"{tag} {msg}", file=sys.stderr, flush=True)
 
-    if ENVIRONMENTS[env].fault_free is not None and not jax.config.jax_enable_x64:
-        jax.config.update("jax_enable_x64", True)  # the fault generator's 64-bit integers (as .run.train_jax)
+    enable_x64_for(env)
     run = builder(env, gid, hyperparams, timesteps, curve_points, curve_seeds)
     train = jax.jit(jax.vmap(run.train, in_axes=(0, None)))
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
