@@ -78,7 +78,7 @@ def sb3_worker(steps: int, seed: int, out_json: str, run_dir: str, algo: str = "
                 callbacks=[Episodes()])
     record = {"train_seconds": res.seconds, "timesteps_done": res.config["timesteps_done"],
               "episodes": episodes, "library": res.config.get("library"),
-              "library_version": res.config.get("library_version")}
+              "library_version": res.config.get("library_version"), "recipe": res.config.get("hyperparams")}
     with open(out_json, "w") as fh:
         json.dump(record, fh)
 
@@ -99,7 +99,8 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1, algo: str 
     else:
         from agents.training.jax.ppo import make_env, make_train, ppo_config as read_config
 
-    cfg, hp = read_config(resolve_recipe(algo, ENV, trainer="jax").hyperparams, ENV_ID, total_timesteps=steps)
+    recipe = dict(resolve_recipe(algo, ENV, trainer="jax").hyperparams)
+    cfg, hp = read_config(recipe, ENV_ID, total_timesteps=steps)
     env, env_params = make_env(cfg)
     train = make_train(cfg, env, env_params)
     key = jax.random.PRNGKey(seed)
@@ -123,7 +124,7 @@ def run_jax(steps: int, seed: int, policy_dir: str, n_seeds: int = 1, algo: str 
             "rollout": cfg.n_envs * cfg.n_steps if algo == "ppo" else cfg.rollout,
             "curve": {"steps": c["steps"].tolist(), "episodes": c["episodes"].tolist(),
                       "return_sum": np.nan_to_num(c["episode_return"] * c["episodes"]).tolist()},
-            "jax_version": jax.__version__, "dtype": cfg.dtype}
+            "jax_version": jax.__version__, "dtype": cfg.dtype, "recipe": recipe}
 
 
 def run_sb3(steps: int, seed: int, run_dir: str, algo: str = "ppo") -> dict:

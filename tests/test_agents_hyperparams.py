@@ -187,8 +187,9 @@ def test_env_section_is_agents_only_and_applied_after_the_gym_id_section(tmp_pat
 def test_the_jitted_trainer_reads_its_own_sections_last():
     """``trainer="jax"`` layers ``default-jax``, then ``<env>-jax`` (centralised) or ``<env>-ma-jax`` (shared) over
     everything SB3 reads: the random_network recipe is SB3's with exactly the ``random_network-jax``
-    keys replaced; the shared recipe does not take the centralised section; an env without a section (tracking,
-    disturbance_rejection, tracking_lossy) trains SB3's recipe."""
+    keys replaced; the shared recipe does not take the centralised section; an env without a section
+    (disturbance_rejection, tracking_lossy) trains SB3's recipe; tracking's sections change only the network (PPO)
+    and the minibatch (SAC), for the jitted trainer alone (SBX's SAC keeps 256)."""
     from agents.config.hyperparam_files import read_hyperparams_file
 
     table = read_hyperparams_file(os.path.join(HYPERPARAMS_DIR, "ppo.yaml"))
@@ -199,9 +200,15 @@ def test_the_jitted_trainer_reads_its_own_sections_last():
     assert all(jx[k] == v for k, v in section.items())
     assert resolve_recipe("ppo", "random_network", trainer="jax").hyperparams == jx
     assert "default-jax" not in table
-    for env in ("tracking", "disturbance_rejection", "tracking_lossy"):
+    for env in ("disturbance_rejection", "tracking_lossy"):
         assert f"{env}-jax" not in table
         assert load_hyperparams("ppo", env, trainer="jax") == load_hyperparams("ppo", env)
+    for algo, key in (("ppo", "policy_kwargs"), ("sac", "batch_size")):
+        sb3, jx = load_hyperparams(algo, "tracking"), load_hyperparams(algo, "tracking", trainer="jax")
+        assert {k for k in jx if jx[k] != sb3.get(k)} == {key}
+    assert load_hyperparams("ppo", "tracking", trainer="jax")["policy_kwargs"]["net_arch"] == [64, 64]
+    assert load_hyperparams("sac", "tracking", trainer="jax")["batch_size"] == 128
+    assert load_hyperparams("sac", "tracking")["batch_size"] == 256
     assert "random_network-ma-jax" not in table
     assert load_hyperparams("ppo", "random_network", multi_agent=True, trainer="jax") == load_hyperparams(
         "ppo", "random_network", multi_agent=True)

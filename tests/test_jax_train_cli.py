@@ -58,7 +58,8 @@ def test_run_directory_records(jax_run):
               "curve_seconds"):
         assert math.isfinite(cfg[k]) and cfg[k] > 0, k
     with np.load(os.path.join(jax_run, "policy.npz"), allow_pickle=False) as z:
-        assert z["pi_w0"].shape == (155, 128) and np.all(np.isfinite(z["pi_w0"]))
+        width = recipe.hyperparams["policy_kwargs"]["net_arch"][0]  # tracking-jax's [64, 64]
+        assert z["pi_w0"].shape == (155, width) and np.all(np.isfinite(z["pi_w0"]))
     tc = json.load(open(os.path.join(jax_run, "train_curve.json")))
     assert tc["steps"] == [1024, 2048] and len(tc["episode_return"]) == 2
 

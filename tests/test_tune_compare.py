@@ -70,14 +70,18 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
 
 
 def test_off_policy_candidates_are_their_algorithms_recipes(tmp_path):
-    """--algo sac: the shipped candidate is sac.yaml's recipe (which the jitted trainer runs as SBX does), a file's
-    section is merged over it; a shared policy is PPO's only."""
+    """--algo sac: ``sb3`` is sac.yaml's recipe as SBX trains it, ``jax`` the same with the jitted trainer's section
+    (tracking's minibatch of 128; none on disturbance_rejection), a file's section is merged over the jitted
+    trainer's recipe; a shared policy is PPO's only."""
     sac = dict(resolve_recipe("sac", "tracking").hyperparams)
-    assert candidate_recipe("sb3", "tracking", algo="sac") == candidate_recipe("jax", "tracking", algo="sac") == sac
+    assert candidate_recipe("sb3", "tracking", algo="sac") == sac
+    assert candidate_recipe("jax", "tracking", algo="sac") == {**sac, "batch_size": 128}
+    assert candidate_recipe("jax", "disturbance_rejection", algo="sac") == dict(
+        resolve_recipe("sac", "disturbance_rejection").hyperparams)
     f = tmp_path / "g4.yml"
     f.write_text(yaml.safe_dump({"dobs_envs/Tracking-v0": {"n_timesteps": 600000, "gradient_steps": 4}}))
     hp = candidate_recipe(str(f), "tracking", algo="sac")
-    assert hp["gradient_steps"] == 4 and hp["train_freq"] == sac["train_freq"] == 4
+    assert hp["gradient_steps"] == 4 and hp["train_freq"] == sac["train_freq"] == 4 and hp["batch_size"] == 128
     with pytest.raises(ValueError, match="PPO only"):
         candidate_recipe("sb3", "tracking", multi_agent=True, algo="sac")
 

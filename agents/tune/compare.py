@@ -19,8 +19,9 @@ Candidates (``NAME=SOURCE``):
 ``--multi-agent``: the shared-policy PPO's recipes (``dobs-envs train --multi-agent``'s sections), trained and
 scored as :mod:`agents.tune.sweep` does with ``--multi-agent``.
 
-``--algo sac`` or ``td3``: the off-policy recipes (``agents/config/hyperparams/<algo>.yaml``; the jitted trainer
-runs SB3's / SBX's recipe, so ``sb3`` and ``jax`` name the same one), trained by
+``--algo sac`` or ``td3``: the off-policy recipes (``agents/config/hyperparams/<algo>.yaml``; ``sb3``: SBX's / SB3's
+recipe, ``jax``: the same with the file's ``<env>-jax`` section, e.g. SAC's minibatch of 128 on tracking; the two
+name the same recipe where the file has no such section), trained by
 :mod:`agents.training.jax.sac` / ``td3`` vmapped over the seeds, each run's final deterministic policy scored as
 above.
 
