@@ -68,6 +68,27 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
         main(["--env", "tracking", "--candidate", f"a={a}", "--candidate", f"b={b}", "--out", str(out)])
     assert exc.value.code == 2
 
+    # --resume: b is kept (not trained again), b2 (b's recipe under a new name) is trained, and gives b's scores:
+    # what a resumed comparison keeps is what a new run gives; statistics over all three candidates
+    res = compare_recipes("tracking", {"b": b, "b2": b}, timesteps=64, seeds=[100, 101], episodes=1, out=str(out),
+                          resume=True, log=lambda *_: None)
+    doc2 = json.loads((out / "compare.json").read_text())
+    assert list(doc2["candidates"]) == ["a", "b", "b2"] and res["status"] == doc2["status"] == "complete"
+    assert doc2["candidates"]["b"] == {**doc["candidates"]["b"], "resumed": True}
+    assert doc2["candidates"]["a"] == doc["candidates"]["a"]
+    assert "resumed" not in doc2["candidates"]["b2"]
+    assert doc2["candidates"]["b2"]["seed_scores"] == doc["candidates"]["b"]["seed_scores"]
+    assert len(doc2["p_improvement"]) == 6 and doc2["p_improvement"]["b < b2"] == 0.5
+    # a resumed comparison must be the same one, and a name keeps its recipe
+    with pytest.raises(ValueError, match="its seeds is"):
+        compare_recipes("tracking", {"c": a}, timesteps=64, seeds=[100, 102], episodes=1, out=str(out), resume=True)
+    with pytest.raises(ValueError, match="another recipe under that name"):
+        compare_recipes("tracking", {"a": b}, timesteps=64, seeds=[100, 101], episodes=1, out=str(out), resume=True)
+    with pytest.raises(FileNotFoundError, match="no comparison to go on with"):
+        compare_recipes("tracking", {"a": a}, timesteps=64, seeds=[100, 101], episodes=1, out=str(tmp_path / "none"),
+                        resume=True)
+    assert json.loads((out / "compare.json").read_text()) == doc2
+
 
 def test_off_policy_candidates_are_their_algorithms_recipes(tmp_path):
     """--algo sac: ``sb3`` is sac.yaml's recipe as SBX trains it, ``jax`` the same with the jitted trainer's section
@@ -116,6 +137,8 @@ def test_a_tiny_sac_comparison_trains_vmapped_seeds_and_scores_them(tmp_path):
     (["--candidate", "a=sb3", "--candidate", "b=/no/such.yml"], "does not exist"),
     (["--candidate", "a=sb3", "--candidate", "b=jax", "--first-seed", "10000"], "--first-seed"),
     (["--candidate", "a=sb3", "--candidate", "b=jax", "--algo", "sac", "--multi-agent"], "PPO only"),
+    (["--candidate", "a=sb3", "--candidate", "b=jax", "--resume", "--overwrite"], "give one"),
+    (["--candidate", "a=sb3", "--resume"], "no comparison to go on with"),
 ])
 def test_usage_errors_exit_2_with_one_line(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as exc:

@@ -30,6 +30,15 @@ Usage: ``python -m agents.tune.compare --env tracking --candidate sb3=sb3 --cand
 per-seed scores, their mean, median and IQM, the CPU time; the winner (lowest mean); and per pair of candidates
 the probability of improvement over seeds (rliable's definition: ``P(X < Y)`` over the runs' scores, lower
 is better, ties counted half).
+
+``--resume``: go on with the ``compare.json`` already in ``--out`` (an interrupted comparison, or a finished one
+given a new candidate): it must be the same comparison (env, algorithm, budget, training seeds, tuning episodes
+and their paper costs). A candidate it holds under the same name with the same recipe is not trained again
+(its entry is kept as it was, marked ``"resumed": true``); the same name with another recipe is an error. Every
+candidate of the file is kept, and the probabilities of improvement and the winner are over all of them. The
+trainers are deterministic for a given seed, recipe and code, so the scores are those a new run would give
+while the code is unchanged (the file does not record the code's revision: resume from a record of the same
+checkout).
 """
 from __future__ import annotations
 
@@ -111,25 +120,67 @@ def _run_offpolicy(env_name: str, algo: str, hp: dict, timesteps: int, seeds: li
     return scores, times
 
 
+def _as_json(x):
+    """``x`` as it reads back from the record (tuples as lists, ...), to compare a recipe with a stored one."""
+    import json
+
+    return json.loads(json.dumps(x))
+
+
+def _resumed_record(path: str, record: dict, recipes: dict) -> dict:
+    """The record at ``path`` checked to be the comparison ``record`` describes (:func:`compare_recipes`'s
+    ``resume``), with its candidates; a candidate of ``recipes`` stored under its name with another recipe is an
+    error."""
+    import json
+
+    try:
+        with open(path) as fh:
+            old = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"--resume: cannot read {path}: {exc}") from None
+    if not isinstance(old, dict) or not isinstance(old.get("candidates"), dict):
+        raise ValueError(f"--resume: {path} is not a comparison record (no 'candidates')")
+    for key in ("env", "algo", "multi_agent", "timesteps", "seeds", "episode_seeds"):
+        if old.get(key) != record[key]:
+            raise ValueError(f"--resume: {path} is another comparison: its {key} is {old.get(key)!r}, this one's "
+                             f"{record[key]!r}")
+    stored = np.asarray(old.get("paper_cost", []), dtype=float)
+    if stored.shape != np.shape(record["paper_cost"]) or not np.allclose(stored, record["paper_cost"], rtol=1e-9,
+                                                                         atol=0.0):
+        raise ValueError(f"--resume: the paper's costs on the tuning episodes differ from those of {path}: the "
+                         "environments changed since, so its scores do not compare with new ones")
+    for name, hp in recipes.items():
+        prev = old["candidates"].get(name)
+        if prev is not None and _as_json(prev.get("recipe")) != _as_json(hp):
+            raise ValueError(f"--candidate {name}: {path} holds another recipe under that name; give this one "
+                             "another name")
+    return old
+
+
 def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
-                    dtype: str = "float32", overwrite: bool = False, multi_agent: bool = False, algo: str = "ppo",
-                    log=print) -> dict:
+                    dtype: str = "float32", overwrite: bool = False, resume: bool = False, multi_agent: bool = False,
+                    algo: str = "ppo", log=print) -> dict:
     """Train and score every candidate (``name -> source``, module doc) of ``algo`` on ``seeds`` and the first
     ``episodes`` tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps
     the finished ones) and returns the record. ``multi_agent``: the shared-policy PPO (as :mod:`agents.tune.sweep`'s).
-    ``dtype`` is PPO's (an off-policy recipe's run takes the recipe's)."""
+    ``dtype`` is PPO's (an off-policy recipe's run takes the recipe's). ``resume``: go on with ``out/compare.json``
+    (module doc)."""
     from ..training.curves import paper_costs
     from .sweep import _run_structure, _write_json
 
-    if len(candidates) < 2:
-        raise ValueError(f"--candidate: give at least two candidates to compare, got {len(candidates)}")
+    if overwrite and resume:
+        raise ValueError("--overwrite and --resume: give one (replace the comparison in --out, or go on with it)")
     seeds = [int(s) for s in seeds]
     check_training_seeds(seeds[0], len(seeds), name="--first-seed")
     episode_seeds = check_episode_seeds(TUNING.start, episodes, TUNING, name="tuning episode seed")
     path = os.path.join(out, "compare.json")
-    if os.path.exists(path) and not overwrite:
-        raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out or pass "
-                              "--overwrite")
+    if resume and not os.path.exists(path):
+        raise FileNotFoundError(f"--resume: no comparison to go on with ({path} does not exist)")
+    if os.path.exists(path) and not (overwrite or resume):
+        raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out, pass "
+                              "--resume to go on with it or --overwrite to replace it")
+    if len(candidates) < (1 if resume else 2):
+        raise ValueError(f"--candidate: give at least two candidates to compare, got {len(candidates)}")
     # errors before training
     recipes = {name: candidate_recipe(src, env_name, multi_agent, algo) for name, src in candidates.items()}
     os.makedirs(out, exist_ok=True)
@@ -137,7 +188,15 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
     record = {"env": env_name, "algo": algo, "trainer": "jax", "multi_agent": bool(multi_agent),
               "timesteps": int(timesteps), "seeds": seeds,
               "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "candidates": {}, "status": "running"}
+    if resume:
+        record["candidates"] = _resumed_record(path, record, recipes)["candidates"]
+        if len(set(record["candidates"]) | set(recipes)) < 2:
+            raise ValueError("--candidate: give at least two candidates to compare (with those of the record)")
     for name, hp in recipes.items():
+        if name in record["candidates"]:
+            record["candidates"][name]["resumed"] = True
+            log(f"candidate {name}: kept from {path} (same recipe, seeds and episodes)")
+            continue
         log(f"candidate {name} ({candidates[name]}): {len(seeds)} seeds")
         if algo == "ppo":
             scores, times = _run_structure(env_name, hp, timesteps, [{}], seeds, episode_seeds, paper, dtype,
@@ -152,8 +211,9 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
             "iqm": float(iqm(s)) if finite.size == s.size else math.inf}
         log(f"  mean {np.mean(s):.4g}, median {np.median(s):.4g}, {times['cpu_seconds']:.0f} CPU s of training")
         _write_json(path, record)
-    names = list(recipes)
-    sc = {n: np.asarray(record["candidates"][n]["seed_scores"]) for n in names}
+    names = list(record["candidates"])
+    sc = {n: np.asarray([math.inf if v is None else v for v in record["candidates"][n]["seed_scores"]], dtype=float)
+          for n in names}
     record["p_improvement"] = {f"{a} < {b}": _p_better(sc[a], sc[b]) for a in names for b in names if a != b}
     record["winner"] = min(names, key=lambda n: record["candidates"][n]["mean"])
     record["status"] = "complete"
@@ -174,7 +234,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--episodes", type=int, default=10, help="tuning episodes per run (from the tuning range)")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--overwrite", action="store_true", help="replace the comparison in --out")
+    ap.add_argument("--resume", action="store_true", help="go on with the comparison in --out: train only the "
+                    "candidates it does not hold (module doc)")
     ap.add_argument("--multi-agent", action="store_true", help="the shared-policy PPO's recipes")
     args = ap.parse_args(argv)
     from ..training.xla import xla_threads
@@ -195,8 +257,9 @@ def main(argv=None) -> int:
     try:
         compare_recipes(args.env, candidates, timesteps=args.timesteps,
                         seeds=range(args.first_seed, args.first_seed + args.seeds), episodes=args.episodes,
-                        out=args.out, overwrite=args.overwrite, multi_agent=args.multi_agent, algo=args.algo)
-    except (ValueError, FileExistsError, HyperparamsError) as exc:
+                        out=args.out, overwrite=args.overwrite, resume=args.resume, multi_agent=args.multi_agent,
+                        algo=args.algo)
+    except (ValueError, FileExistsError, FileNotFoundError, HyperparamsError) as exc:
         ap.error(str(exc))
     return 0
 
