@@ -253,7 +253,7 @@ core.reset(None, list(range(B)))
 core.advance(np.zeros((B, core.n_inputs)))
 # the position of the fault argument in each compiled function
 where = {advance_batch: -1, advance_range: -1, pk.advance_rows: -1, pk.period_tile: 4, pk.period_tile_any: 4,
-         pk._scatter: 8, pk.period_copy: 4}
+         pk._tile_body: 4, pk._scatter: 8, pk.period_copy: 4}
 ideal = lambda t: isinstance(t, (types.NoneType, types.Omitted)) or (isinstance(t, types.BaseTuple) and t.count == 0)
 print(json.dumps({d.py_func.__name__: [ideal(s[i]) for s in d.signatures] for d, i in where.items()}))
 '''

@@ -138,3 +138,35 @@ def test_integer_actions_still_accepted():
     g = gym.make("dobs_envs/Tracking-v0").unwrapped
     g.reset(seed=0)
     g.step(np.zeros(g.action_space.shape, np.int32))
+
+
+def test_action_bound_arrays_share_one_compiled_step_and_clip_alike():
+    """An ``action_bound`` array given writable, read-only or strided is the same bound: the inputs are clipped
+    alike, and the compiled step is not compiled again for it (a read-only or strided array is another numba
+    type; each new type compiled the whole step again, minutes cold)."""
+    from dobs_envs.envs.step_kernel import advance_batch
+
+    plain = np.full(N_INPUTS, 2.0)
+    frozen = plain.copy()
+    frozen.flags.writeable = False
+    strided = np.repeat(plain, 2)[::2]
+    results, n_signatures = [], []
+    for bound in (plain, frozen, strided):
+        env = TrackingEnv(action_bound=bound)
+        env.reset(seed=0)
+        big = {a: np.full(env.action_space(a).shape, 50.0, dtype=np.float32) for a in env.agents}
+        obs = env.step(big)[0]
+        results.append(np.concatenate([obs[a] for a in env.possible_agents]))
+        n_signatures.append(len(advance_batch.signatures))
+        env.close()
+    assert n_signatures[1] == n_signatures[2] == n_signatures[0]
+    np.testing.assert_array_equal(results[1], results[0])
+    np.testing.assert_array_equal(results[2], results[0])
+
+
+def test_parallel_env_refuses_an_array_of_actions():
+    """The ParallelEnv takes a dict agent -> action: an array is refused by name, not with numpy's IndexError."""
+    env = TrackingEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="actions must be a dict agent -> action, got ndarray"):
+        env.step(np.zeros(N_INPUTS, dtype=np.float32))

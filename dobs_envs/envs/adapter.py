@@ -225,7 +225,7 @@ class CoreAdapter:
                   and all(v.dtype.kind in NUMERIC_KINDS for v in vals))  # bool/complex: refused by the slow path
             if ok:
                 np.concatenate(vals, out=out, casting="same_kind")
-        except (KeyError, TypeError, ValueError, AttributeError):
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError):  # IndexError: an array, not a dict
             ok = False
         if not ok:
             self._parse_agent_actions(actions, out)

@@ -271,7 +271,9 @@ class EnvCore:
             self._oo_none = inc.sum(axis=1) == 0  # nodes without links: nothing to receive (fraction 1)
         #: the step's constants by name (the compiled step gets them as the plain tuple ``_consts``)
         self._step_consts = StepConsts(
-            u_lo=np.ascontiguousarray(-bound), u_hi=np.ascontiguousarray(bound), period=self.control_period,
+            # both contiguous and read-only whatever the caller's bound was: a writable and a read-only array (or
+            # a strided one) are distinct numba types, and each would compile the whole step again (minutes, cold)
+            u_lo=_ro(np.ascontiguousarray(-bound)), u_hi=_ro(np.ascontiguousarray(bound)), period=self.control_period,
             state_bound=self.state_bound, bound_step_cost=self.bound_step_cost, log_c0=self._log_c0,
             big_obs=float(np.finfo(self.obs_dtype).max), max_cycles=-1 if mc is None else int(mc),
             penalty_cycles=int(self.penalty_cycles), has_ref=self.has_reference,

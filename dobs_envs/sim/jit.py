@@ -8,7 +8,9 @@ observer yields a non-finite state the environment detects and terminates on, in
 behaviour). ``njit`` / ``njit_inline``: cached, GIL-free, numpy error model (``njit_inline``: inlined
 into its callers at the IR level, where ``if arg is None:`` branches are pruned per specialisation when
 the argument is None; ``len(tuple_arg)`` is made a constant only in a compiled function's own body, not in
-an inlined one: see ``period_kernel._tile_body``'s ``nf``).
+an inlined one). ``njit_inline`` is for small helpers: numba copies an inlined body once per call site, at a
+cost that grows with the body's size times its number of variables, so a large body is a compiled function
+of its own (``period_kernel._tile_body``).
 """
 from __future__ import annotations
 
