@@ -45,7 +45,7 @@ from .sim.fault_kernel import FaultPeriod, co_link_row, unpack_fault_args
 from .sim.fault_state import NO_FAULT, FaultState, co_link_numpy, fault_args, faulted_estimates, init_fault_state
 from .sim.faults import Faults
 from .sim.numpy_step import control_period_faulted_numpy
-from .sim.period_kernel import PeriodArrays, advance_rows, unpack_kernel_args
+from .sim.period_kernel import advance_rows, period_arrays, unpack_kernel_args
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
@@ -184,7 +184,8 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
     u = np.zeros((Bsz, m))
     r = np.zeros((Bsz, m))
     w = np.empty(m)
-    pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
+    pa = period_arrays(x, z, gamma, gamma_s, v, x_r, u, r)  # the environments' PeriodArrays type
+    lo = np.int64(0)
     if len(fault) > 0:
         FF, FI, fst, co_nodes = fault
         ff = unpack_fault_args(FF, FI)
@@ -237,9 +238,9 @@ def _rollout_kernel(state, beta, kp, law, loop, rec, fault):
             s += 1
         if k < steps:
             if len(fault) == 0:
-                advance_rows(pa, ka, 0, Bsz, fault)
+                advance_rows(pa, ka, lo, Bsz, fault)
             else:
-                advance_rows(pa, ka, 0, Bsz, fperiod)
+                advance_rows(pa, ka, lo, Bsz, fperiod)
 
 
 def fault_seeds(seed, batch: int) -> np.ndarray:

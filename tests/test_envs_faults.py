@@ -245,15 +245,19 @@ import json
 import numpy as np
 from numba import types
 from dobs_envs.envs import TrackingEnv
-from dobs_envs.envs.step_kernel import advance_batch, advance_range
+from dobs_envs.envs.step_kernel import advance_range
 from dobs_envs.sim import period_kernel as pk
 B = pk.TILE + pk.MIN_TILE + 1  # whole tiles, a remainder tile and one copy alone: every path of advance_rows
 core = TrackingEnv.make_core(B, faults={"oo_loss": 0.2, "co_loss": 0.1})
 core.reset(None, list(range(B)))
 core.advance(np.zeros((B, core.n_inputs)))
+# then the simulation on the same (faulted) network: a rollout of NE2 (tracking's network) with its controller
+from dobs_envs.rollout import rollout
+from dobs_envs.scenarios.paper import ne2
+rollout(ne2(), batch=B, t_end=0.05, faults={"oo_loss": 0.2, "co_loss": 0.1})
 # the position of the fault argument in each compiled function
-where = {advance_batch: -1, advance_range: -1, pk.advance_rows: -1, pk.period_tile: 4, pk.period_tile_any: 4,
-         pk._tile_body: 4, pk._scatter: 8, pk.period_copy: 4}
+where = {advance_range: -1, pk.advance_rows: -1, pk._advance_tiles: 4, pk.period_tile: 4, pk._scatter: 8,
+         pk.period_copy: 4}
 ideal = lambda t: isinstance(t, (types.NoneType, types.Omitted)) or (isinstance(t, types.BaseTuple) and t.count == 0)
 print(json.dumps({d.py_func.__name__: [ideal(s[i]) for s in d.signatures] for d, i in where.items()}))
 '''
@@ -261,10 +265,13 @@ print(json.dumps({d.py_func.__name__: [ideal(s[i]) for s in d.signatures] for d,
 
 def test_a_faulted_network_compiles_no_ideal_engine(tmp_path):
     """The engine's functions branch on ``len(fault)`` (``NO_FAULT = ()`` on the ideal network), which numba
-    prunes per specialisation both ways: a process that steps only faulted copies compiles no ideal-network
-    specialisation of any engine function (``if fault is None:`` was not pruned for a fault tuple, so a
-    faulted environment compiled the whole ideal engine too: twice the cold compile). (The other way, an
-    ideal-only process compiles no fault code: also measured, 80 s of cold compile, left out of the suite.)
+    prunes per specialisation both ways: a process that steps and simulates only faulted copies compiles no
+    ideal-network specialisation of any engine function (``if fault is None:`` was not pruned for a fault
+    tuple, so a faulted environment compiled the whole ideal engine too: twice the cold compile). The
+    environment's step and the simulation's rollout share every specialisation of the period kernel (a
+    rollout's inputs in another memory layout compiled the whole period kernel a second time). (The other
+    way, an ideal-only process compiles no fault code: also measured, 80 s of cold compile, left out of the
+    suite.)
     Run in a fresh process (this one has compiled both) with an empty numba cache
     (a kernel loaded from the cache brings its callees inside it, not as specialisations of theirs) and
     without LLVM optimisation (``NUMBA_OPT=0``: pruning happens before typing, whatever the level)."""
@@ -280,3 +287,7 @@ def test_a_faulted_network_compiles_no_ideal_engine(tmp_path):
     for name, flags in ideal.items():
         assert flags, f"{name} was not compiled: the test no longer reaches it"
         assert not any(flags), f"{name} has a specialisation for the ideal network: {flags}"
+    # the step and the rollout share the period kernel: one specialisation each, two of period_tile (the tile
+    # width TILE as a constant, the remainder's at run time)
+    assert {name: len(flags) for name, flags in ideal.items()} == {
+        "advance_range": 1, "advance_rows": 1, "_advance_tiles": 1, "period_tile": 2, "_scatter": 1, "period_copy": 1}

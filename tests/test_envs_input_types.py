@@ -148,7 +148,7 @@ def test_action_bound_arrays_share_one_compiled_step_and_clip_alike():
 
     from dobs_envs.envs import step_kernel
 
-    def compiled():  # the specialisations of the step's entry points (advance_batch; advance_range for one copy)
+    def compiled():  # the specialisations of the step's compiled functions (advance_range, first_non_finite, ...)
         return sum(len(d.signatures) for d in vars(step_kernel).values() if isinstance(d, CPUDispatcher))
 
     plain = np.array(TrackingEnv().core.action_bound)  # the default bound (NE2's), given by the user

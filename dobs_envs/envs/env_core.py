@@ -71,7 +71,7 @@ from .observation import FeatureLayout, resolve_components
 from .options import EnvOptions, check_state_bound, state_bound_limit
 from ..sim.period_kernel import TILE
 from .step_kernel import (REASON_HORIZON, REASON_NON_FINITE, REASON_NONE, REASON_STATE_BOUND, StepConsts,
-                          advance_batch, advance_range, first_non_finite)
+                          advance_range, first_non_finite)
 
 
 #: reward shape -> code passed to the compiled step (0 quadratic, 1 log, 2 sqrt)
@@ -523,11 +523,10 @@ class EnvCore:
         if u.shape != (self.num_envs, self.n_inputs):
             raise ValueError(f"u must have shape ({self.num_envs}, {self.n_inputs}) (copies, inputs), got {u.shape}")
         fault = NO_FAULT if self.faults is None else (self._FP, self._fs, self._rx, self._fconsts)
+        args = (self._state, self._W, self._obs, self._outs, self._sig, self._ka, self._SF, self._SI, self._consts)
         if len(self.ranges) == 1:
-            bad = advance_batch(self._state, self._W, self._obs, self._outs, u, self._sig, self._ka, self._SF, self._SI,
-                                self._consts, fault)
+            bad = advance_range(0, self.num_envs, u, args, fault)
         else:
-            args = (self._state, self._W, self._obs, self._outs, self._sig, self._ka, self._SF, self._SI, self._consts)
             bad = first_non_finite(u)
             if bad < 0:
                 if self._pool is None:

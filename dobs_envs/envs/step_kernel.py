@@ -1,4 +1,4 @@
-"""One environment step of every copy of a batch in one compiled call, with or without communication faults.
+"""One environment step of every copy of a batch, compiled, with or without communication faults.
 
 :func:`advance_batch` does, for every copy ``b`` (:func:`advance_range` for a range of copies,
 which threads may run concurrently on disjoint ranges: it releases the GIL):
@@ -195,10 +195,14 @@ def finish_row(b, cb, xn, fin, x, W, F, obs2, o, c):
 
 @_njit
 def advance_range(lo, hi, u, args, fault):
-    """Steps 1-5 (module docstring) for the copies ``lo .. hi-1`` (inputs checked by the caller);
-    releases the GIL: threads may advance disjoint ranges of one batch concurrently. ``args`` the plain
-    tuple ``(state, W, obs, outs, sig, ka, SF, SI, consts)`` (:func:`advance_batch`'s arguments but ``u``),
-    ``fault`` NO_FAULT or the faults' plain tuple (module doc)."""
+    """Steps 1-5 (module docstring) for the copies ``lo .. hi-1``; releases the GIL: threads may advance
+    disjoint ranges of one batch concurrently. ``args`` the plain tuple ``(state, W, obs, outs, sig, ka, SF,
+    SI, consts)`` (:func:`advance_batch`'s arguments but ``u``), ``fault`` NO_FAULT or the faults' plain
+    tuple (module doc). Returns -1, or the first copy of the range whose input is not finite: then nothing
+    was modified (a caller running several ranges checks the whole batch first, :func:`first_non_finite`)."""
+    for b in range(lo, hi):
+        if not _row_finite(u, b):
+            return b
     state, W, obs, outs, sig, kp, SF, SI, consts = args
     KF, KI = kp
     ka = unpack_kernel_args(KF, KI)
@@ -257,11 +261,13 @@ def advance_range(lo, hi, u, args, fault):
             fault_rows(b0, b1, st, W, obs2, fa, ef, True)
             for b in range(b0, b1):
                 finish_row(b, cost[b], xnorm[b], finite[b], x, W, F, obs2, o, c)
+    return -1
 
 
-@_njit
 def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault):
-    """One step of every copy (see module docstring), serial.
+    """One step of every copy (see module docstring), serial: :func:`advance_range` over all copies (not a
+    compiled function around it: numba would link, optimise and compile to machine code the whole step
+    again for that level, ~10 CPU s of every cold compile on the ideal network, ~15 s faulted).
 
     Parameters
     ----------
@@ -281,9 +287,4 @@ def advance_batch(state, W, obs, outs, u, sig, ka, SF, SI, consts, fault):
     -------
     int : -1, or the first copy whose input is not finite (then nothing was modified).
     """
-    bad = first_non_finite(u)
-    if bad >= 0:
-        return bad
-    # np.int64(0), not 0: a literal would compile a second advance_range besides the threads' (int64, int64)
-    advance_range(np.int64(0), u.shape[0], u, (state, W, obs, outs, sig, ka, SF, SI, consts), fault)
-    return -1
+    return advance_range(0, u.shape[0], u, (state, W, obs, outs, sig, ka, SF, SI, consts), fault)

@@ -10,7 +10,7 @@ into its callers at the IR level, where ``if arg is None:`` branches are pruned 
 the argument is None; ``len(tuple_arg)`` is made a constant only in a compiled function's own body, not in
 an inlined one). ``njit_inline`` is for small helpers: numba copies an inlined body once per call site, at a
 cost that grows with the body's size times its number of variables, so a large body is a compiled function
-of its own (``period_kernel._tile_body``).
+of its own (``period_kernel.period_tile``).
 """
 from __future__ import annotations
 

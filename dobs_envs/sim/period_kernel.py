@@ -17,7 +17,7 @@ network's code only and runs no fault code, and a faulted specialisation contain
 the held measurement noise added to ``y_i`` (eq. (localmeasure)), and the consensus term ``d_i`` of eq.
 (H_idefine): ``(L xhat)_i`` over the neighbour lists, or ``sum_{e: receiver e = i} a_e^g (xhat_i - r_e)``
 over the copies ``r_e`` node ``i`` holds, refreshed by the broadcasts (in :func:`period_copy` and
-:func:`_tile_body`: at the Euler steps ``s`` counted from the copy's reset that are multiples of
+:func:`period_tile`: at the Euler steps ``s`` counted from the copy's reset that are multiples of
 ``exchange_steps``, every delivering link takes the sender's estimate, or with ``oo_delay > 0`` the
 snapshot of ``lag`` broadcasts before from the copy's ring; the continuous exchange without delay
 refreshes them at every shortened step of a split Euler step too). The draws, the deliveries and the
@@ -41,9 +41,8 @@ Two layouts of the same arithmetic
 - :func:`period_tile` advances a *tile* of ``W`` copies stored with the copy axis
   **innermost** (``X (n, W)``, ``Z (N, n, W)``, ...): every statement is a loop over
   the ``W`` copies, which the compiler turns into SIMD instructions across copies.
-  One body (:func:`_tile_body`), compiled twice: :func:`period_tile` with ``W`` a
-  compile-time constant (:data:`TILE`: constant trip counts) and :func:`period_tile_any`
-  with ``W`` known at run time (any remainder of fewer than :data:`TILE` copies, unpadded;
+  Compiled twice: with ``W`` a compile-time constant (:data:`TILE`: constant trip counts)
+  and with ``W`` known at run time (any remainder of fewer than :data:`TILE` copies, unpadded;
   LLVM unrolls narrow *constant* widths completely, which takes minutes to compile).
 
 :func:`advance_rows` cuts a range of copies into tiles of :data:`TILE` copies
@@ -116,9 +115,6 @@ from .kernel_args import KernelArgs
 
 ensure_fresh()  # numba's cache keys each file alone: drop caches built from other kernel sources
 
-if HAVE_NUMBA:
-    import numba
-
 #: Copies per SIMD tile of :func:`advance_rows`, a compile-time constant (NE2, one core: 5.0 us per
 #: copy and control step at 128, 5.4 at 64; the same code with a run-time width: 5.8 at 128).
 TILE = 128
@@ -135,7 +131,7 @@ MAX_SPLIT = 4096
 TILE_RECHECK = 0.5
 
 __all__ = ["HAVE_NUMBA", "FASTMATH", "TILE", "MIN_TILE", "MAX_SPLIT", "PeriodArrays", "CopyScratch", "TileState",
-           "TileWork", "period_copy", "period_tile", "period_tile_any", "advance_rows", "unpack_kernel_args",
+           "TileWork", "period_copy", "period_tile", "advance_rows", "period_arrays", "unpack_kernel_args",
            "control_period_compiled", "control_period_faulted_compiled", "flops_per_period"]
 
 
@@ -186,7 +182,7 @@ class TileState(NamedTuple):
 
 
 class TileWork(NamedTuple):
-    """Work arrays of :func:`_tile_body`, copy axis last."""
+    """Work arrays of :func:`period_tile`, copy axis last."""
 
     Y: np.ndarray  # (N, p, W)
     XH: np.ndarray  # (N, n, W)
@@ -430,7 +426,7 @@ def period_copy(b, pa, ka, sc, fault, fsc):
 def _crit(dg, dt, g, ph, nw2):
     """Stability test of one Euler step of length ``dt`` at node i (module doc, "Stable steps"):
     ``2 deg_i dt (gamma_i + dt phi_i ||eps_iu||^2)``, at most 1 for a stable step. The same
-    expression in :func:`period_copy` and :func:`_tile_body` (eqs. (zidynamic), (gammaiis))."""
+    expression in :func:`period_copy` and :func:`period_tile` (eqs. (zidynamic), (gammaiis))."""
     return 2.0 * dg * dt * (g + dt * ph * nw2)
 
 
@@ -461,27 +457,6 @@ def _scratch_tile(ka, W):
 
 @_njit
 def period_tile(ts, ka, wk, W, fault, ft, lo):
-    """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place (:func:`_tile_body`).
-
-    ``W`` must be a compile-time constant (:data:`TILE`): call it from compiled code with a
-    constant (from Python, every call would recompile); widths of 32 or more (LLVM unrolls
-    narrower constant tiles completely: minutes of compilation). Other widths:
-    :func:`period_tile_any`.
-    """
-    numba.literally(W)  # compiled per tile width: the loops over the copies have constant trip counts
-    _tile_body(ts, ka, wk, W, fault, ft, lo)
-
-
-@_njit
-def period_tile_any(ts, ka, wk, W, fault, ft, lo):
-    """:func:`period_tile` with the width ``W`` known at run time only (one compilation for every
-    width; the loops over the copies are vectorised with run-time trip counts). The same
-    arithmetic per copy: results are bitwise those of :func:`period_tile` and :func:`period_copy`."""
-    _tile_body(ts, ka, wk, W, fault, ft, lo)
-
-
-@_njit
-def _tile_body(ts, ka, wk, W, fault, ft, lo):
     """One control period of a tile of ``W`` copies (``lo ..``), copy axis last, in place.
 
     ``ts`` the :class:`TileState` (``X (n, W)``, ``Z (N, n, W)``, ``G``/``GS (N, W)``, ``V (m_v, W)``,
@@ -489,13 +464,17 @@ def _tile_body(ts, ka, wk, W, fault, ft, lo):
     ``fault`` NO_FAULT or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod` with the tile's fault arrays
     ``ft`` (:class:`~dobs_envs.sim.fault_kernel.FaultTile`). Per copy the same operations in the same
     order as :func:`period_copy`; the innermost loops run over the copies (SIMD), each pass over the
-    copies adding up to four terms. Called by :func:`period_tile` with ``W`` a literal (numba passes it on: a
-    specialisation per width, loops of constant trip count) and by :func:`period_tile_any` with ``W`` at run
-    time. The branches on ``len(fault)`` (a tuple argument: numba makes it a constant) are pruned per
+    copies adding up to four terms. Compiled per kind of ``W``: called with ``W`` a literal (:data:`TILE`
+    from :func:`_advance_tiles`: a specialisation per width, loops of constant trip count; widths of 32 or
+    more: LLVM unrolls narrower constant tiles completely, minutes of compilation) or with ``W`` a run-time
+    integer (one specialisation for every width; loops vectorised with run-time trip counts; a call from
+    Python is one). The same arithmetic per copy either way: results are bitwise those of
+    :func:`period_copy`. The branches on ``len(fault)`` (a tuple argument: numba makes it a constant) are pruned per
     specialisation (:data:`~dobs_envs.sim.fault_state.NO_FAULT`). Not inlined (``inline="always"``): numba
     copies an inlined body block by block, each block with its own copy of the whole variable scope: for
     this body that took ~10 % of the engine's cold compile (2026-12-06, a fresh process stepping the tracking
-    core, beside another job: ideal network 124 -> 107 CPU s, faulted 207 -> 191 CPU s).
+    core, beside another job: ideal network 124 -> 107 CPU s, faulted 207 -> 191 CPU s). No wrapper either:
+    every compiled caller level links, optimises and compiles to machine code the whole body again.
     """
     rows = ka.rows
     proj_range, nbr_idx, nbr_w, deg = ka.proj_range, ka.nbr_idx, ka.nbr_w, ka.degree
@@ -756,7 +735,7 @@ def _gather(ts, lo, nl, pa):
 @_njit
 def _scatter(ts, wk, ft, lo, nl, pa, ka, sc, fault, fsc):
     """Copies ``lo .. lo+nl-1`` back from the tile (with their fault state), except lanes flagged in
-    ``wk.flags`` (stability test of :func:`_tile_body`): those are advanced again from their unchanged
+    ``wk.flags`` (stability test of :func:`period_tile`): those are advanced again from their unchanged
     batch rows by :func:`period_copy`."""
     X, Z, G, GS, V, XR = ts.X, ts.Z, ts.G, ts.GS, ts.V, ts.XR
     x, z, gamma, gamma_s, v, x_r = pa.x, pa.z, pa.gamma, pa.gamma_s, pa.v, pa.x_r
@@ -785,7 +764,7 @@ def _scatter(ts, wk, ft, lo, nl, pa, ka, sc, fault, fsc):
 def advance_rows(pa, ka, lo, hi, fault):
     """One control period of copies ``lo .. hi-1`` of ``pa`` (:class:`PeriodArrays`) in place: tiles of
     :data:`TILE` copies, then a remainder of at least :data:`MIN_TILE` copies as one tile of exactly that
-    width (:func:`period_tile_any`), both in :func:`_advance_tiles`; a smaller remainder copy by copy; the
+    width (:func:`period_tile` with a run-time width), both in :func:`_advance_tiles`; a smaller remainder copy by copy; the
     same per-copy arithmetic either way. ``fault`` None, or a :class:`~dobs_envs.sim.fault_kernel.FaultPeriod`:
     the faulted period, then each copy's next-period draws (:func:`~dobs_envs.sim.fault_kernel.draws_rows`).
     Threads may run disjoint ranges concurrently (no GIL)."""
@@ -809,21 +788,24 @@ def _advance_tiles(pa, ka, lo, hi, fault, sc, fsc):
     at least :data:`MIN_TILE` copies as one tile); returns the first copy left for copy-by-copy steps. Its own
     function: the tile work (:class:`TileState`, :class:`TileWork` and the fault tile) kept out of
     :func:`advance_rows`'s frame made a step of one copy ~1.5 us faster (NE2, B = 1, one substep, the
-    period through :func:`advance_rows`: 7.7-7.9 -> 6.1-6.4 us)."""
+    period through :func:`advance_rows`: 7.7-7.9 -> 6.1-6.4 us). Only :func:`period_tile` gets the width
+    :data:`TILE` as a constant (a literal: constant trip counts); the helpers get it as a run-time integer
+    (``wt``), like the remainder's, so each of them is compiled once for both."""
     N, n, p = pa.z.shape[1], pa.z.shape[2], ka.C.shape[1]
     b = lo
     if hi - b >= TILE:
-        ts, wk = _scratch_tile(ka, TILE)
+        wt = np.int64(TILE)
+        ts, wk = _scratch_tile(ka, wt)
         if len(fault) == 0:
             ft = None
         else:
-            ft = fk.scratch_tile(fault.args, N, n, p, TILE)
+            ft = fk.scratch_tile(fault.args, N, n, p, wt)
         while hi - b >= TILE:
-            _gather(ts, b, TILE, pa)
+            _gather(ts, b, wt, pa)
             if len(fault) > 0:
-                fk.gather_tile(ft, b, TILE, fault)
+                fk.gather_tile(ft, b, wt, fault)
             period_tile(ts, ka, wk, TILE, fault, ft, b)
-            _scatter(ts, wk, ft, b, TILE, pa, ka, sc, fault, fsc)
+            _scatter(ts, wk, ft, b, wt, pa, ka, sc, fault, fsc)
             b += TILE
     if hi - b >= MIN_TILE:
         nl = hi - b
@@ -835,7 +817,7 @@ def _advance_tiles(pa, ka, lo, hi, fault, sc, fsc):
         _gather(ts, b, nl, pa)
         if len(fault) > 0:
             fk.gather_tile(ft, b, nl, fault)
-        period_tile_any(ts, ka, wk, nl, fault, ft, b)
+        period_tile(ts, ka, wk, nl, fault, ft, b)
         _scatter(ts, wk, ft, b, nl, pa, ka, sc, fault, fsc)
         b = hi
     return b
@@ -845,6 +827,17 @@ def _advance_tiles(pa, ka, lo, hi, fault, sc, fsc):
 #: ``SimParams.kernel_packed`` (views of the buffers; ``proj_range`` as 0/1 integers), compiled from
 #: source generated from the declaration (:func:`dobs_envs.packing.compiled_unpack`).
 unpack_kernel_args = compiled_unpack(KernelArgs, _njit, "unpack_kernel_args")
+
+
+@_njit_inline
+def period_arrays(x, z, gamma, gamma_s, v, x_r, u, r):
+    """The :class:`PeriodArrays` of C-contiguous ``u``, ``r (B, m)`` as the environments' step passes them:
+    column slices (layout "A"; the step's are columns of its work rows). One type of :class:`PeriodArrays`,
+    so :func:`advance_rows` and everything below it is compiled once for the environments and the
+    simulation (a C-layout ``u`` was a second compilation of the whole period kernel: ~75 CPU s on the
+    ideal network, ~130 s faulted)."""
+    m = u.shape[1]
+    return PeriodArrays(x, z, gamma, gamma_s, v, x_r, u[:, 0:m], r[:, 0:m])
 
 
 @_njit
@@ -866,12 +859,13 @@ def _control_period(x, z, gamma, gamma_s, v, x_r, u, r, kp, fault):
     v = v.copy()
     x_r = x_r.copy()
     KF, KI = kp
-    pa = PeriodArrays(x, z, gamma, gamma_s, v, x_r, u, r)
+    pa = period_arrays(x, z, gamma, gamma_s, v, x_r, u, r)
+    lo = np.int64(0)
     if len(fault) == 0:
-        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], fault)
+        advance_rows(pa, unpack_kernel_args(KF, KI), lo, x.shape[0], fault)
     else:
         FF, FI, fs, delivered = fault
-        advance_rows(pa, unpack_kernel_args(KF, KI), 0, x.shape[0], fault_period(FF, FI, fs, delivered))
+        advance_rows(pa, unpack_kernel_args(KF, KI), lo, x.shape[0], fault_period(FF, FI, fs, delivered))
     return x, z, gamma, gamma_s, v, x_r
 
 
