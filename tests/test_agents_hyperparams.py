@@ -136,6 +136,23 @@ def test_file_errors_name_the_section_and_key(tmp_path, extra, match):
     assert path in str(info.value)
 
 
+def test_a_file_read_again_is_parsed_again_when_it_changes(tmp_path):
+    """Parsed files are kept (the benchmark resolves a recipe per run): a changed file is read again, and a
+    caller's changes to the returned sections do not reach the next caller."""
+    path = _write(tmp_path, BASE)
+    first = read_hyperparams_file(path)
+    first["default"]["n_timesteps"] = -1
+    assert read_hyperparams_file(path)["default"]["n_timesteps"] == 1000
+    with open(path, "a") as fh:
+        fh.write("default-ma:\n  n_epochs: 3\n")
+    os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 1))  # even within the clock's tick
+    assert read_hyperparams_file(path)["default-ma"]["n_epochs"] == 3
+    with open(path, "a") as fh:
+        fh.write("  n_steps: [\n")  # broken YAML: the error, not the kept sections
+    with pytest.raises(HyperparamsError, match="not valid YAML"):
+        read_hyperparams_file(path)
+
+
 def test_rescale_wrapper_means_normalized_actions(tmp_path):
     path = _write(tmp_path, BASE + "  env_wrapper:\n    - gymnasium.wrappers.RescaleAction: "
                                    "{min_action: -1, max_action: 1}\ndefault-residual:\n  env_wrapper: null\n")
