@@ -112,9 +112,8 @@ def step_outputs(outs):
 def first_non_finite(u):
     """Index of the first copy whose input row has NaN/inf, or -1."""
     for b in range(u.shape[0]):
-        for j in range(u.shape[1]):
-            if not np.isfinite(u[b, j]):
-                return b
+        if not _row_finite(u, b):
+            return b
     return -1
 
 
