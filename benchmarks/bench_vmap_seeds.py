@@ -27,6 +27,8 @@ import resource
 import sys
 import time
 
+from bench_args import add_record_args, check_args
+
 
 def _load() -> list:
     return [round(x, 2) for x in os.getloadavg()]
@@ -50,14 +52,9 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=20_000, help="env steps of each run (default 20000)")
     ap.add_argument("--seeds", type=int, default=10, help="seeds vmapped in one call (default 10)")
     ap.add_argument("--repeats", type=int, default=2, help="alternate runs of each compiled function (default 2)")
-    ap.add_argument("--out", default=None, help="write the JSON record here")
-    ap.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    add_record_args(ap)
     args = ap.parse_args(argv)
-    for name in ("steps", "seeds", "repeats"):
-        if getattr(args, name) < 1:
-            ap.error(f"--{name} must be a positive integer, got {getattr(args, name)}")
-    if args.out and os.path.exists(args.out) and not args.overwrite:
-        ap.error(f"--out {args.out} exists; pass --overwrite to replace it")
+    check_args(ap, args, ("steps", "seeds", "repeats"))
 
     from agents.training.xla import xla_threads
 
