@@ -118,10 +118,12 @@ def test_build_vec_env_uses_the_core_for_dobs_envs_only():
 
 def test_episode_statistics_and_ppo_smoke():
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
     venv = build_vec_env("tracking", n_envs=4, seed=0, env_kwargs={"max_cycles": 8}, normalize_actions=True)
     assert venv.action_space.high.tolist() == [1.0] * 5
     model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0, verbose=0)
+    model.set_logger(Logger(folder=None, output_formats=[]))  # SB3's default logger leaves an empty temp directory
     model.learn(64)
     assert model.num_timesteps >= 64
     venv.reset()

@@ -105,10 +105,13 @@ def _trained(name, options):
     sb3 = pytest.importorskip("stable_baselines3")
     import gymnasium as gym
 
+    from stable_baselines3.common.logger import Logger
+
     from dobs_envs.envs.adapter import CoreAdapter
 
     genv = gym.make(ENVIRONMENTS[name].gym_id, **options)
     model = sb3.PPO("MlpPolicy", genv, n_steps=256, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.set_logger(Logger(folder=None, output_formats=[]))  # SB3's default logger leaves an empty temp directory
     model.learn(512)
 
     def inputs(core, k):

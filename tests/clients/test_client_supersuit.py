@@ -34,6 +34,8 @@ def test_ppo_parameter_sharing(make):
     # no seed= here: SuperSuit's SB3 wrapper has no seed() (SB3 would call it)
     sb3.common.utils.set_random_seed(0)
     model = sb3.PPO("MlpPolicy", venv, n_steps=128, batch_size=128, n_epochs=2, verbose=0)
+    # SB3's default logger leaves an empty temp directory
+    model.set_logger(sb3.common.logger.Logger(folder=None, output_formats=[]))
     model.learn(3000)
     assert model.num_timesteps >= 3000
     lengths = [ep["l"] for ep in model.ep_info_buffer]
