@@ -12,6 +12,7 @@ pytest.importorskip("jax")
 
 from agents.training.recipes import resolve_recipe  # noqa: E402
 from agents.training.seeds import TUNING  # noqa: E402
+from agents.tune import sweep  # noqa: E402
 from agents.tune.compare import _p_better, candidate_recipe, compare_recipes, main  # noqa: E402
 
 TINY = {"n_envs": 2, "n_steps": 16, "batch_size": 32, "n_epochs": 1}
@@ -54,6 +55,7 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
     a = _recipe_file(tmp_path / "a.yml", learning_rate=1e-3)
     b = _recipe_file(tmp_path / "b.yml", learning_rate=1e-4)
     out = tmp_path / "cmp"
+    sweep._COMPILED.clear()  # this process's compiled structures (another test's may match a's)
     rec = compare_recipes("tracking", {"a": a, "b": b}, timesteps=64, seeds=[100, 101], episodes=1, out=str(out),
                           log=lambda *_: None)
     doc = json.loads((out / "compare.json").read_text())
@@ -64,6 +66,9 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
         assert all(s > 0 for s in c["seed_scores"]) and c["mean"] == pytest.approx(np.mean(c["seed_scores"]))
     assert doc["winner"] == min("ab", key=lambda n: doc["candidates"][n]["mean"]) == rec["winner"]
     assert doc["p_improvement"]["a < b"] + doc["p_improvement"]["b < a"] == pytest.approx(1.0)
+    # a and b differ in a float hyperparameter only (traced): b runs a's compiled program
+    assert "compile_reused" not in doc["candidates"]["a"] and doc["candidates"]["a"]["compile_cpu_seconds"] > 0
+    assert doc["candidates"]["b"]["compile_reused"] is True and doc["candidates"]["b"]["compile_cpu_seconds"] == 0
     with pytest.raises(SystemExit) as exc:
         main(["--env", "tracking", "--candidate", f"a={a}", "--candidate", f"b={b}", "--out", str(out)])
     assert exc.value.code == 2
@@ -118,6 +123,7 @@ def test_a_tiny_sac_comparison_trains_vmapped_seeds_and_scores_them(tmp_path):
         f.write_text(yaml.safe_dump({"dobs_envs/Tracking-v0": {"n_timesteps": 64, **tiny, "learning_rate": lr}}))
         files[name] = str(f)
     out = tmp_path / "cmp"
+    sweep._COMPILED.clear()
     rec = compare_recipes("tracking", files, timesteps=64, seeds=[100, 101], episodes=1, out=str(out), algo="sac",
                           log=lambda *_: None)
     doc = json.loads((out / "compare.json").read_text())
@@ -128,6 +134,7 @@ def test_a_tiny_sac_comparison_trains_vmapped_seeds_and_scores_them(tmp_path):
         assert len(c["seed_scores"]) == 2 and all(x > 0 for x in c["seed_scores"])
         assert c["seed_scores"][0] != c["seed_scores"][1]
         assert c["cpu_seconds"] > 0
+    assert doc["candidates"]["b"]["compile_reused"] is True  # a and b differ in a traced float only
 
 
 @pytest.mark.parametrize("argv, message", [

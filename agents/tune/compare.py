@@ -29,7 +29,9 @@ Usage: ``python -m agents.tune.compare --env tracking --candidate sb3=sb3 --cand
 --seeds 8 --episodes 10 --out runs/compare_tracking`` writes ``compare.json``: per candidate the recipe, the
 per-seed scores, their mean, median and IQM, the CPU time; the winner (lowest mean); and per pair of candidates
 the probability of improvement over seeds (rliable's definition: ``P(X < Y)`` over the runs' scores, lower
-is better, ties counted half).
+is better, ties counted half). Candidates that differ only in float hyperparameters (traced arguments of the
+compiled run) share one compilation (:func:`agents.tune.sweep.compiled_vmap`): the later ones record compile
+times of 0 and ``"compile_reused": true``.
 
 ``--resume``: go on with the ``compare.json`` already in ``--out`` (an interrupted comparison, or a finished one
 given a new candidate): it must be the same comparison (env, algorithm, budget, training seeds, tuning episodes
@@ -99,19 +101,17 @@ def _run_offpolicy(env_name: str, algo: str, hp: dict, timesteps: int, seeds: li
     from ..training.jax.export import policy_arrays, select_run
     from ..training.jax.numpy_policy import NumpyPolicy
     from ..training.jax.run import build_run, enable_x64_for, jax_env
-    from .sweep import score_runs
+    from .sweep import compiled_vmap, score_runs
 
     env_name, gid = jax_env(env_name)
     enable_x64_for(env_name)
     run = build_run(algo, env_name, gid, hp, timesteps)
     train = run.make_train(run.cfg, run.env, run.env_params)
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
-    c0, w0 = time.process_time(), time.perf_counter()
-    run_all = jax.jit(jax.vmap(train, in_axes=(0, None))).lower(keys, run.hp).compile()
+    run_all, times = compiled_vmap((algo, env_name, repr(run.cfg)), train, keys, run.hp, hps_axis=None)
     c1, w1 = time.process_time(), time.perf_counter()
     result = jax.device_get(jax.block_until_ready(run_all(keys, run.hp)))
-    times = {"compile_cpu_seconds": c1 - c0, "compile_wall_seconds": w1 - w0,
-             "cpu_seconds": time.process_time() - c1, "wall_seconds": time.perf_counter() - w1}
+    times.update(cpu_seconds=time.process_time() - c1, wall_seconds=time.perf_counter() - w1)
     env_np = gym_factory(env_name, {})()
     policies = [NumpyPolicy.from_arrays(*policy_arrays(select_run(result, i), run.cfg, run.hp, run.env,
                                                        run.env_params)) for i in range(len(seeds))]

@@ -94,6 +94,36 @@ def _structure_recipe(base: dict, structure: dict) -> dict:
     return hp
 
 
+#: compiled vmapped trainings of this process by structure (:func:`compiled_vmap`), the least recently used first
+_COMPILED: dict = {}
+_COMPILED_KEEP = 4
+
+
+def compiled_vmap(structure: tuple, train, keys, hps, hps_axis: int | None = 0) -> tuple:
+    """``(run_all, times)``: ``jax.jit(jax.vmap(train, in_axes=(0, hps_axis)))`` compiled for ``keys`` and ``hps``
+    (``hps_axis`` 0: a value per run, ``None``: one for every run), with the CPU and wall seconds of its
+    compilation. ``structure`` names what fixes the compiled program (the algorithm, the env,
+    ``repr`` of the run's static config): the float hyperparameters are traced arguments, so two candidates of one
+    structure compile the same program, and the second one reuses the first one's (compile times 0,
+    ``compile_reused``), as do the comparisons of :mod:`agents.tune.compare` (the last :data:`_COMPILED_KEEP`
+    structures of the process are kept)."""
+    import jax
+
+    leaves = jax.tree_util.tree_leaves((keys, hps))
+    key = (structure, hps_axis, bool(jax.config.jax_enable_x64), jax.tree_util.tree_structure((keys, hps)),
+           tuple((np.shape(x), np.dtype(getattr(x, "dtype", None) or type(x)).str) for x in leaves))
+    if key in _COMPILED:
+        _COMPILED[key] = _COMPILED.pop(key)  # the most recent last
+        return _COMPILED[key], {"compile_cpu_seconds": 0.0, "compile_wall_seconds": 0.0, "compile_reused": True}
+    c0, w0 = time.process_time(), time.perf_counter()
+    run_all = jax.jit(jax.vmap(train, in_axes=(0, hps_axis))).lower(keys, hps).compile()
+    times = {"compile_cpu_seconds": time.process_time() - c0, "compile_wall_seconds": time.perf_counter() - w0}
+    _COMPILED[key] = run_all
+    while len(_COMPILED) > _COMPILED_KEEP:
+        _COMPILED.pop(next(iter(_COMPILED)))
+    return run_all, times
+
+
 def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], seeds: list[int],
                    episode_seeds: list[int], paper: np.ndarray, dtype: str,
                    multi_agent: bool = False) -> tuple[np.ndarray, dict]:
@@ -147,12 +177,10 @@ def _run_structure(env_name: str, hp: dict, timesteps: int, points: list[dict], 
     if "gamma" in FLOAT_SPACE and "gamma" not in (hp.get("normalize") or {}):
         hps["norm_gamma"] = hps["gamma"]  # VecNormalize's gamma follows the algorithm's unless the recipe sets it
     keys = jnp.stack([jax.random.PRNGKey(s) for s in np.tile(seeds, P)])
-    c0, w0 = time.process_time(), time.perf_counter()
-    run_all = jax.jit(jax.vmap(train)).lower(keys, hps).compile()
+    run_all, times = compiled_vmap(("ppo", bool(multi_agent), env_name, repr(cfg)), train, keys, hps)
     c1, w1 = time.process_time(), time.perf_counter()
     result = jax.block_until_ready(run_all(keys, hps))
-    times = {"compile_cpu_seconds": c1 - c0, "compile_wall_seconds": w1 - w0,
-             "cpu_seconds": time.process_time() - c1, "wall_seconds": time.perf_counter() - w1}
+    times.update(cpu_seconds=time.process_time() - c1, wall_seconds=time.perf_counter() - w1)
     scores = score_runs(env_np, [policy(select_run(result, i), {k: float(hps[k][i]) for k in HPARAMS})
                                  for i in range(P * S)], episode_seeds, paper, parallel=multi_agent)
     env_np.close()
