@@ -69,6 +69,27 @@ def test_plan_trainer_selects_the_default_rows_and_budgets_are_equal():
     assert AGENTS["ppo_jax"].information != AGENTS["ppo_ma_jax"].information
 
 
+def test_sqrt_cost_jitted_agent_trains_on_the_sqrt_reward_and_is_scored_on_the_task_cost():
+    """``ppo_sqrt_jax`` is ``ppo_sqrt``'s jitted counterpart: the full budget trains it (its counterpart's env steps),
+    its training-only env option (the reward ``-sqrt(c) T``) reaches the env the jitted trainer builds, and the env
+    its runs are scored on has no such option (every row is scored on the task's cost)."""
+    from agents.benchmark.plan import _training_overrides
+    from agents.training.jax.run import build_run
+
+    a = AGENTS["ppo_sqrt_jax"]
+    assert a.train_env_kwargs == AGENTS["ppo_sqrt"].train_env_kwargs == (("reward", "sqrt"),)
+    assert (a.algo, a.multi_agent, a.trainer, a.information) == ("ppo", False, "jax", AGENTS["ppo_sqrt"].information)
+    assert "ppo_sqrt_jax" in default_agents("full", "jax") and "ppo_sqrt_jax" not in default_agents("full", "sb3")
+    spec = next(sp for sp in plan_runs("tracking", "full", "x", trainer="jax").specs if sp["agent"] == "ppo_sqrt_jax")
+    assert spec["steps"] == BUDGETS["full"]["agents"]["ppo_sqrt"] and "reward" not in spec["env_kwargs"]
+    hp = _training_overrides(spec)
+    assert hp["env_kwargs"]["reward"] == "sqrt"
+    setup = build_run("ppo", "tracking", "dobs_envs/Tracking-v0", hp, 4096)
+    plain = build_run("ppo", "tracking", "dobs_envs/Tracking-v0", _training_overrides({**spec, "agent": "ppo_jax"}), 4096)
+    assert setup.env.structure.reward_code == 2 and plain.env.structure.reward_code == 0
+    assert setup.fields["train_env_kwargs"]["reward"] == "sqrt" and setup.fields["env_kwargs"] == {}
+
+
 @pytest.mark.parametrize("trainer", ["sb3", "jax", "all"])
 def test_named_agents_train_their_budgets_steps_whatever_the_trainer(trainer):
     """An agent named in ``agents`` trains its budget's env steps whichever trainer selects the default rows: with

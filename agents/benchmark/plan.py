@@ -78,6 +78,8 @@ AGENTS = {
     # the jitted trainer (agents.training.jax; its algorithms: agents.training.jax.ALGOS)
     "ppo_jax": AgentSpec("ppo", False, None, "PPO (JAX)", trainer="jax", counterpart="ppo"),
     "ppo_ma_jax": AgentSpec("ppo", True, None, "PPO (JAX, shared)", trainer="jax", counterpart="ppo_ma"),
+    "ppo_sqrt_jax": AgentSpec("ppo", False, None, "PPO (JAX, sqrt-cost training)", (("reward", "sqrt"),), trainer="jax",
+                              counterpart="ppo_sqrt"),
     "sac_jax": AgentSpec("sac", False, None, "SAC (JAX)", trainer="jax", counterpart="sac"),
 }
 #: ``benchmark --trainer``: the learned rows of the default agent set (the analytic rows are always there)
