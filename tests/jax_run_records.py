@@ -9,7 +9,9 @@ CONFIG_KEYS = frozenset([
     "dtype", "multi_agent", "hybrid", "seed", "key", "timesteps", "timesteps_done", "n_updates", "rollout", "n_agents",
     "normalize_actions", "env_kwargs", "train_env_kwargs", "normalize", "hyperparams", "policy", "curve_seeds",
     "status", "setup_seconds", "compile_seconds", "compile_cpu_seconds", "train_seconds", "train_cpu_seconds",
-    "curve_seconds", "total_seconds", "total_cpu_seconds"])
+    "curve_seconds", "total_seconds", "total_cpu_seconds",
+    # since 2026-12-06 (agents.training.provenance): the runs of results/ trained before lack it
+    "provenance"])
 #: a shared-policy run's (train --trainer jax --multi-agent)
 MARL_CONFIG_KEYS = CONFIG_KEYS | {"marl_env", "samples_per_update", "agent_id"}
 #: a seed of a vmapped run adds the shared figures

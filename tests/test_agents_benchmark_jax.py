@@ -17,6 +17,7 @@ pytest.importorskip("optax")
 
 from agents.benchmark.driver import run_benchmark  # noqa: E402
 from agents.benchmark.plan import AGENTS, ANALYTIC, BUDGETS, TRAINERS, default_agents, plan_runs  # noqa: E402
+from agents.training.provenance import run_provenance  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 from jax_run_records import CONFIG_KEYS, MARL_CONFIG_KEYS, VMAPPED_KEY  # noqa: E402
 
@@ -107,6 +108,7 @@ def test_jitted_rows_count_each_seed_as_a_run(first):
 
     out, summ, doc = first
     assert summ["trainer"] == "jax"
+    assert summ["provenance"] == run_provenance()  # the code and the machine of the command
     rows = {r["policy"]: r for r in doc["results"]}
     assert set(rows) == {AGENTS[k].label for k in JAX_AGENTS} | set(ANALYTIC)
     assert {"PPO (JAX)", "PPO (JAX, shared)"} <= set(rows)

@@ -13,6 +13,7 @@ from pettingzoo import ParallelEnv
 from agents.training.algos import BACKENDS, LEGACY_LIBRARY, backend
 from agents.config.hyperparam_files import ALGOS, load_hyperparams
 from agents.training.loading import load_agent
+from agents.training.provenance import run_provenance
 from agents.training.train import train
 
 
@@ -71,6 +72,7 @@ def _check_saved(path, algo, multi_agent, normalize):
     cfg = json.load(open(os.path.join(path, "config.json")))
     assert cfg["algo"] == algo and cfg["multi_agent"] == multi_agent
     assert (cfg["library"], cfg["library_version"]) == (backend(algo).library, backend(algo).library_version())
+    assert cfg["provenance"] == run_provenance()  # the code and the machine that trained it
     assert os.listdir(os.path.join(path, "checkpoints"))
 
 

@@ -14,6 +14,7 @@ import pytest
 jax = pytest.importorskip("jax")
 pytest.importorskip("optax")
 
+from agents.training.provenance import run_provenance  # noqa: E402
 from dobs_envs.cli import main  # noqa: E402
 from jax_run_records import CONFIG_KEYS  # noqa: E402
 
@@ -51,6 +52,7 @@ def test_run_directory_records(jax_run):
     assert cfg["env"] == "tracking" and cfg["env_id"] == "dobs_envs/Tracking-v0" and cfg["seed"] == 3
     assert cfg["timesteps"] == 2048 and cfg["timesteps_done"] == 2048 and cfg["n_updates"] == 2
     assert cfg["status"] == "complete" and set(cfg) == CONFIG_KEYS
+    assert cfg["provenance"] == run_provenance()  # the code and the machine that trained it
     # the recipe: SB3 PPO's (agents/config/hyperparams/ppo.yaml) with the --hyperparams overrides
     recipe = resolve_recipe("ppo", "tracking", overrides=HP, trainer="jax")  # the jitted trainer's recipe
     assert cfg["hyperparams"] == json.loads(json.dumps(recipe.hyperparams))

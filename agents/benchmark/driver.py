@@ -53,6 +53,7 @@ import shutil
 import time
 
 from ..config.envs import FAULT_FREE
+from ..training.provenance import run_provenance
 from .backends import Job, make_backend
 from .plan import (REEVALUATE, REUSE, BenchmarkPlan, RunConflictError, agent_spec, pending_runs, plan_runs,
                    replaced_runs, stored_answer)
@@ -179,5 +180,5 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     for e in P.envs:
         per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e], fault_free.get(e))
     return write_summary(out, P, per_env_rows, docs, trainer=trainer, backend=backend, address=address,
-                         workers=getattr(be, "workers", None), executed_on=placed,
+                         workers=getattr(be, "workers", None), executed_on=placed, provenance=run_provenance(),
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

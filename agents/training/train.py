@@ -18,7 +18,8 @@ one sample per agent, so the SB3 budget is ``timesteps * n_agents``.
 A run directory holds ``model.zip``, ``vecnormalize.pkl`` (when observations or
 rewards are normalised), ``config.json`` (everything needed to rebuild the env and
 the policy inputs; ``status`` running / interrupted / complete and ``timesteps_done``;
-``library`` and ``library_version``, the implementation that trained it)
+``library`` and ``library_version``, the implementation that trained it; ``provenance``, the source revision
+and the machine: :mod:`agents.training.provenance`)
 and ``checkpoints/`` (``<algo>_<sb3 steps>_steps.zip`` with its normaliser); see :mod:`agents.training.runs`.
 Ctrl-C saves the run as interrupted (:class:`TrainingInterrupted`) and :func:`resume` continues it
 from its last save.
@@ -37,6 +38,7 @@ from ..config.hyperparam_files import MULTI_AGENT_ALGOS
 from ..vecenv.batched_core import CoreVecEnv
 from .algos import AlgoBackend, BackendUnavailable, backend, backend_of
 from .env_factory import build_vec_env
+from .provenance import run_provenance
 from .recipes import Recipe, recipe_from_hyperparams, resolve_recipe
 from .runs import (COMPLETE, INTERRUPTED, RUNNING, RunDirError, clear_run, default_run_dir, load_or_refuse,
                    read_run_config, resume_point, save_atomic, write_json_atomic)
@@ -191,7 +193,7 @@ def _setup(env, name: str, algo_backend: AlgoBackend, *, multi_agent: bool, hybr
         "bc": None, "seed": seed, "timesteps": timesteps, "n_agents": n_agents, "agent_id": agent_id,
         "normalize_actions": norm_act, "action_low": act_low, "action_high": act_high,
         "env_kwargs": user_kw, "train_env_kwargs": kw, "normalize": bool(norm), "checkpoint_freq": ckpt,
-        "hyperparams": dict(recipe.hyperparams),
+        "hyperparams": dict(recipe.hyperparams), "provenance": run_provenance(),
     }
     return _Setup(venv=venv, n_agents=n_agents, config=config)
 

@@ -19,8 +19,8 @@ algorithm's ``make_train``, ``jax.random.PRNGKey(seed)``), runs it and writes in
   (dobs-envs'), ``jax_version``, ``jaxlib_version``, ``optax_version``, the env and its JAX id, the recipe
   (``hyperparams``), the seed, the budget (``timesteps``; ``timesteps_done``: whole rollouts, at least the budget),
   ``n_updates``, ``rollout`` (env steps per update), the times (``setup_seconds``, ``compile_seconds`` /
-  ``compile_cpu_seconds``, ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``) and
-  ``status``.
+  ``compile_cpu_seconds``, ``train_seconds`` / ``train_cpu_seconds``: the compiled run alone, ``curve_seconds``),
+  ``status`` and ``provenance`` (the source revision and the machine: :mod:`agents.training.provenance`).
 
 CPU times are this process's (``time.process_time``), wall times ``time.perf_counter``.
 """
@@ -37,6 +37,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from ..curves import CURVE_EPISODES, CURVE_POINTS, CURVE_SEED
+from ..provenance import run_provenance
 from ..runs import COMPLETE, RUNNING, clear_run, write_json_atomic
 from ..seeds import TUNING
 from ..train import TrainResult
@@ -115,14 +116,16 @@ def _rollout(cfg) -> int:
 def run_config(env: str, algo: str, fields: dict, *, seed: int, curve_seeds: list) -> dict:
     """``config.json`` of a jitted run as it starts (``status`` running): the trainer and its versions, the run's
     ``fields`` (its builder's: :func:`build_run`, :func:`.run_marl.build_marl_run`), the seed and its key, the
-    exported policy's file, the learning curve's episodes. The one place these fields are assembled (:func:`train_jax`,
+    exported policy's file, the learning curve's episodes, what trained it (``provenance``:
+    :func:`agents.training.provenance.run_provenance`). The one place these fields are assembled (:func:`train_jax`,
     :func:`.run_marl.train_jax_marl`, :func:`.vmap_seeds.train_jax_seeds`); :func:`finish_config` completes it."""
     import jax
 
     return {"env": env, "algo": algo, "trainer": TRAINER, "library": LIBRARY, "library_version": _version("dobs-envs"),
             "jax_version": jax.__version__, "jaxlib_version": _version("jaxlib"), "optax_version": _version("optax"),
             **fields, "seed": int(seed), "key": f"jax.random.PRNGKey({int(seed)})", "timesteps_done": 0,
-            "policy": "policy.npz", "curve_seeds": [int(s) for s in curve_seeds], "status": RUNNING}
+            "policy": "policy.npz", "curve_seeds": [int(s) for s in curve_seeds], "status": RUNNING,
+            "provenance": run_provenance()}
 
 
 def finish_config(config: dict, steps_done: int, times: dict) -> dict:
