@@ -33,25 +33,26 @@ ARCHIVES = {
     # the budget's nine agents: the six PPO-family ones, SAC, TD3 and CrossQ at PPO's step count
     # issue 40: the jitted PPO, 10 seeds vmapped in one call, with SB3's tracking recipe (chosen over the sweep's winner
     # on the tuning range, ppo.yaml)
-    # + the jitted shared PPO and the jitted SAC (SB3/SBX's tracking recipes), 10 seeds vmapped each
-    "tracking_full_jax_runs.tar.gz": ("tracking", "full", 30,
+    # + the jitted shared PPO and the jitted SAC (SB3/SBX's tracking recipes), 10 seeds vmapped each, and the jitted PPO
+    # trained on the sqrt cost (ppo_sqrt_jax: the jitted PPO's recipe of the env, as ppo_sqrt takes PPO's)
+    "tracking_full_jax_runs.tar.gz": ("tracking", "full", 40,
                                       {"tracking": ("docs/results/full_tracking_jax.md",
                                                     "## The jitted agents (full budget, tracking)")},
-                                      ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
+                                      ["ppo_jax", "ppo_ma_jax", "ppo_sqrt_jax", "sac_jax"]),
     # the jitted PPO, shared PPO and SAC with SB3's recipes (random_network: PPO with its section random_network-jax)
-    "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 30,
+    "disturbance_rejection_full_jax_runs.tar.gz": ("disturbance_rejection", "full", 40,
                                                    {"disturbance_rejection": (
                                                        "docs/results/full_disturbance_rejection.md",
                                                        "## The jitted agents (full budget, disturbance_rejection)")},
-                                                   ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
-    "random_network_full_jax_runs.tar.gz": ("random_network", "full", 30,
+                                                   ["ppo_jax", "ppo_ma_jax", "ppo_sqrt_jax", "sac_jax"]),
+    "random_network_full_jax_runs.tar.gz": ("random_network", "full", 40,
                                             {"random_network": ("docs/results/full_random_network.md",
                                                                 "## The jitted agents (full budget, random_network)")},
-                                            ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
-    "hetero_mas_full_jax_runs.tar.gz": ("hetero_mas", "full", 30,
+                                            ["ppo_jax", "ppo_ma_jax", "ppo_sqrt_jax", "sac_jax"]),
+    "hetero_mas_full_jax_runs.tar.gz": ("hetero_mas", "full", 40,
                                         {"hetero_mas": ("docs/results/full_hetero_mas.md",
                                                         "## The jitted agents (full budget, hetero_mas)")},
-                                        ["ppo_jax", "ppo_ma_jax", "sac_jax"]),
+                                        ["ppo_jax", "ppo_ma_jax", "ppo_sqrt_jax", "sac_jax"]),
     # the six PPO-family agents with SB3's recipes, 10 runs each (the off-policy agents not trained on these envs)
     "disturbance_rejection_full_runs.tar.gz": ("disturbance_rejection", "full", 60,
                                                {"disturbance_rejection": (
