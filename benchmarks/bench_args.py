@@ -3,6 +3,7 @@ their positive counts (usage errors exit 2 with one line, an existing record is 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 
 
@@ -19,3 +20,19 @@ def check_args(ap: argparse.ArgumentParser, args: argparse.Namespace, positive: 
             ap.error(f"--{name} must be a positive integer, got {getattr(args, name)}")
     if args.out and os.path.exists(args.out) and not args.overwrite:
         ap.error(f"--out {args.out} exists; pass --overwrite to replace it")
+
+
+def jax_runtime() -> dict:
+    """The JAX version and the XLA settings a record was measured with, and the load average at its end."""
+    import jax
+
+    return {"jax": jax.__version__, "PJRT_NPROC": os.environ.get("PJRT_NPROC"), "XLA_FLAGS": os.environ.get("XLA_FLAGS"),
+            "load_avg": [round(x, 2) for x in os.getloadavg()]}
+
+
+def write_record(args: argparse.Namespace, record: dict) -> None:
+    """Write ``record`` as JSON to ``--out`` if given (replacing a file only with ``--overwrite``)."""
+    if args.out:
+        with open(args.out, "w" if args.overwrite else "x") as f:
+            json.dump(record, f, indent=1)
+        print(f"wrote {args.out}")

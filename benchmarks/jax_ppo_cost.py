@@ -28,11 +28,10 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from bench_args import add_record_args, check_args  # noqa: E402
+from bench_args import add_record_args, check_args, jax_runtime, write_record  # noqa: E402
 
 FULL = 600_000  # the full budget's steps per run
 
@@ -121,14 +120,10 @@ def main(argv=None) -> int:
     split["rollout_without_environment"] = split["rollout"] - split["environment"]
     record = {"env": args.env, "steps_timed": args.steps, "seeds": args.seeds, "repeats": args.repeats, **info,
               "cpu_s_per_600k_run": times, "median": med, "split_cpu_s_per_600k_run": split,
-              "jax": jax.__version__, "PJRT_NPROC": os.environ.get("PJRT_NPROC"),
-              "XLA_FLAGS": os.environ.get("XLA_FLAGS"), "load_avg": [round(x, 2) for x in os.getloadavg()]}
+              **jax_runtime()}
     print(f"{args.env}, {args.seeds} run(s) vmapped, CPU s per 600k-step run (medians of {args.repeats}): "
           + ", ".join(f"{k} {v:.1f}" for k, v in split.items()))
-    if args.out:
-        with open(args.out, "w" if args.overwrite else "x") as f:
-            json.dump(record, f, indent=1)
-        print(f"wrote {args.out}")
+    write_record(args, record)
     return 0
 
 

@@ -29,7 +29,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from bench_args import add_record_args, check_args  # noqa: E402
+from bench_args import add_record_args, check_args, jax_runtime, write_record  # noqa: E402
 
 ENVS_DEFAULT = ("tracking", "disturbance_rejection", "random_network", "hetero_mas")
 
@@ -124,20 +124,13 @@ def main(argv=None) -> int:
         for r in rows:
             print(json.dumps(r))
         return 0
-    import jax
-
     for r in rows:
         print(f"{r['env']:22s}{' p' + str(r['process']) if 'process' in r else ''}: {r['flops_per_step_per_run'] / 1e6:.0f} "
               f"MFLOP per gradient step per run, {r['gflops_per_cpu_s']:.1f} GFLOP per CPU s, "
               f"{r['cpu_s_for_the_runs_gradient_steps']:.0f} CPU s for {r['seeds']} runs' "
               f"{r['gradient_steps_per_run']} gradient steps ({r['tflops_for_the_runs_gradient_steps']:.1f} TFLOP)")
-    record = {"processes": args.processes, "steps_timed": args.steps, "repeats": args.repeats, "rows": rows,
-              "jax": jax.__version__, "PJRT_NPROC": os.environ.get("PJRT_NPROC"), "XLA_FLAGS": os.environ.get("XLA_FLAGS"),
-              "load_avg": [round(x, 2) for x in os.getloadavg()]}
-    if args.out:
-        with open(args.out, "w" if args.overwrite else "x") as f:
-            json.dump(record, f, indent=1)
-        print(f"wrote {args.out}")
+    write_record(args, {"processes": args.processes, "steps_timed": args.steps, "repeats": args.repeats,
+                        "rows": rows, **jax_runtime()})
     return 0
 
 
