@@ -132,6 +132,7 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
         those runs first).
     """
     t_start = time.perf_counter()
+    provenance = run_provenance()  # the code and machine as the command starts (files may change while it runs)
     P = plan_runs(env, budget, out, seed=seed, eval_seed=eval_seed, episodes=episodes, timesteps=timesteps,
                   agents=agents, seeds=seeds, threads=threads, recipes=recipes, agent_seeds=agent_seeds,
                   trainer=trainer)
@@ -180,5 +181,5 @@ def run_benchmark(env: str = "tracking", budget: str = "quick", out: str = "runs
     for e in P.envs:
         per_env_rows[e], docs[e] = write_env_report(out, e, P, results, analytic[e], fault_free.get(e))
     return write_summary(out, P, per_env_rows, docs, trainer=trainer, backend=backend, address=address,
-                         workers=getattr(be, "workers", None), executed_on=placed, provenance=run_provenance(),
+                         workers=getattr(be, "workers", None), executed_on=placed, provenance=provenance,
                          timings_s={"train_and_evaluate_wall": train_wall, "total": time.perf_counter() - t_start})

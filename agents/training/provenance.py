@@ -18,7 +18,9 @@ So a run records which code (``source``) and which CPU (``machine``) produced it
   the SIMD extensions present (``simd``: those that change the compiled arithmetic), the number of logical CPUs, the
   platform and Python's version.
 
-Read once per process (cached). Nothing here enters a run's numbers or the benchmark's reuse of stored runs.
+Read once per process (cached), when a run starts (a benchmark: when the command starts): the code imported then
+is the code that runs, whatever happens to the files afterwards. Nothing here enters a run's numbers or the
+benchmark's reuse of stored runs.
 """
 from __future__ import annotations
 
