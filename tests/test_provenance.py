@@ -66,7 +66,8 @@ def test_installed_commit_reads_pep_610_direct_url(monkeypatch):
 
     for text, expected in [(json.dumps({"url": "https://x/y.git", "vcs_info": {"vcs": "git", "commit_id": "f00d"}}),
                             "f00d"),
-                           (json.dumps({"url": "file:///src", "dir_info": {}}), None), (None, None), ("{not json", None)]:
+                           (json.dumps({"url": "file:///src", "dir_info": {}}), None), (None, None), ("{not json", None),
+                           (json.dumps({"vcs_info": "malformed"}), None), (json.dumps([1]), None)]:
         monkeypatch.setattr(metadata, "distribution", lambda name, t=text: Dist(t))
         assert provenance._installed_commit() == expected
 

@@ -51,9 +51,9 @@ def _installed_commit() -> str | None:
         from importlib import metadata
 
         info = json.loads(metadata.distribution("dobs-envs").read_text("direct_url.json") or "{}")
-    except Exception:  # noqa: BLE001 - no metadata, no file, not JSON: unknown
+        commit = info["vcs_info"]["commit_id"]
+    except Exception:  # noqa: BLE001 - no metadata, no file, not JSON, no such field: unknown
         return None
-    commit = info.get("vcs_info", {}).get("commit_id") if isinstance(info, dict) else None
     return commit if isinstance(commit, str) else None
 
 
