@@ -50,12 +50,9 @@ def measure(env: str, seeds: int, steps: int, repeats: int, timesteps: int) -> d
     act_dim = int(jenv.action_space(params).shape[0])
     B, S = cfg.batch_size, seeds
 
-    def init(key):
-        p = sac.init_params(key, obs_dim, act_dim, cfg.net_arch)
-        la = jnp.float32(0.0)
-        return p, sac._critic_params(p), la, sac.init_opts(p, la)
-
-    state = jax.vmap(init)(jax.random.split(jax.random.PRNGKey(0), S))
+    hooks = sac.SACHooks(cfg, obs_dim, act_dim)  # the trainer's own learner state (alpha 1)
+    keys = jax.random.split(jax.random.PRNGKey(0), S)
+    state = jax.vmap(lambda key: hooks.init(key, {"ent_coef": jnp.float32(1.0)}))(keys)
     k = jax.random.split(jax.random.PRNGKey(1), 5)
     batch = (jax.random.normal(k[0], (S, B, obs_dim)), jax.random.uniform(k[1], (S, B, act_dim), minval=-1.0,
                                                                            maxval=1.0),

@@ -62,12 +62,9 @@ def source_revision(root: str | None = None) -> dict:
     git checkout (an installed package): the commit pip installed it from if that was a git URL, ``dirty`` None;
     both None otherwise, or when git cannot be run."""
     unknown = {"commit": None, "dirty": None}
-    if root is None:
-        root = _ROOT
-        if not os.path.exists(os.path.join(root, ".git")):
-            return {"commit": _installed_commit(), "dirty": None}
-    if not os.path.exists(os.path.join(root, ".git")):  # a directory, or a file in a worktree
-        return unknown
+    if not os.path.exists(os.path.join(_ROOT if root is None else root, ".git")):  # a directory, or a worktree's file
+        return {"commit": _installed_commit(), "dirty": None} if root is None else unknown
+    root = _ROOT if root is None else root
     try:
         commit = _git(root, "rev-parse", "HEAD")
         dirty = bool(_git(root, "status", "--porcelain", "--untracked-files=no"))
