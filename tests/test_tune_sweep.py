@@ -41,7 +41,10 @@ def test_a_tiny_sweep_writes_its_record_and_a_recipe_that_trains(tmp_path):
     assert doc["best"]["score"] == min(t["score"] for t in doc["trials"])
     from agents.training.jax.ppo import ppo_config
 
-    best = yaml.safe_load((tmp_path / "best.yml").read_text())
+    text = (tmp_path / "best.yml").read_text()
+    # its comments say how to use it: a --recipe file of the centralised agent (the shared policy's is the next test's)
+    assert "--recipe FILE" in text and "section tracking-jax of" in text and "--multi-agent" not in text
+    best = yaml.safe_load(text)
     (section, raw), = best.items()
     assert section == "dobs_envs/Tracking-v0" and raw["n_envs"] == 2 and raw["n_timesteps"] == 64
     from agents.training.recipes import recipe_file_section
@@ -72,7 +75,7 @@ def test_a_tiny_shared_policy_sweep_scores_through_the_pettingzoo_env(tmp_path):
                                                                        trainer="jax").hyperparams)
     assert all(t["score"] > 0 for t in rec["trials"])
     text = (tmp_path / "best.yml").read_text()
-    assert "shared-policy PPO" in text
+    assert "shared-policy PPO" in text and "section tracking-ma-jax of" in text and "--multi-agent" in text
     (section, hp), = yaml.safe_load(text).items()
     assert section == "tracking-ma-jax" and hp["n_envs"] == 2 and hp["agent_id"] == rec["recipe"]["agent_id"]
     _, hps = ippo_config(hp, "tracking", total_timesteps=64)

@@ -296,12 +296,14 @@ def _write_best(path: str, record: dict, base: dict, structure: dict, best: dict
     section = gym_id(record["env"])
     if record.get("multi_agent"):  # an agents-only section of agents/config/hyperparams/ppo.yaml (rl-zoo3 skips it)
         section = f"{record['env']}-ma-jax"
+        lines.append(f"# The section {section} of agents/config/hyperparams/ppo.yaml (read by dobs-envs train "
+                     "--trainer jax --multi-agent).")
     else:  # a section rl-zoo3 reads (train / compare --recipe FILE): its vocabulary
         from .outputs import recipe_section
 
         hp = recipe_section(hp)
-        lines.append(f"# The section {section} of agents/config/hyperparams/ppo.yaml (read by dobs-envs train "
-                     "--trainer jax --multi-agent).")
+        lines.append("# Its keys go over the jitted trainer's recipe with dobs-envs train --trainer jax --recipe FILE "
+                     f"(or as the section {record['env']}-jax of agents/config/hyperparams/ppo.yaml).")
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
         yaml.safe_dump({section: hp}, fh, sort_keys=False)
