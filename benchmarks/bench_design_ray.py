@@ -276,7 +276,7 @@ def run_design(N: int, n: int, seed: int, one_cpu: bool) -> dict:
           f"{t_serial:.2f} s; speed-up of the 2-CPU Ray call over serial {t_serial / warm2:.2f}x")
     if one_cpu:
         t1 = model["table"]["worker, o from 1 CPU"]
-        print(f"  with the overhead fitted to the warm 1-CPU call instead (on workers): "
+        print("  with the overhead fitted to the warm 1-CPU call instead (on workers): "
               + ", ".join(f"{P} cores {t1[P]:.2f} s" for P in CORES))
         for m, v in model["validation"]["predicted_2cpu"].items():
             print(f"  validation ({m} model): calibrated on 1 CPU ({model['validation']['measured_ray_1cpu']:.2f} s, "

@@ -27,8 +27,6 @@ import time
 
 os.environ.setdefault("PJRT_NPROC", "1")
 
-import numpy as np  # noqa: E402
-
 
 def _time(fn, repeats: int):
     """``(min CPU seconds, min wall seconds)`` of ``fn()`` over ``repeats`` calls after one warm-up."""
@@ -63,7 +61,6 @@ def bench_core(env_id: str, B: int, steps: int, repeats: int) -> dict:
 def bench_jax(env_id: str, B: int, steps: int, repeats: int, dtype: str, lockstep: float = 0.0,
               faults: bool = False) -> dict:
     import jax
-    import jax.numpy as jnp
 
     from dobs_envs.jax import make
 
