@@ -61,15 +61,15 @@ def source_revision(root: str | None = None) -> dict:
     """``{"commit", "dirty"}`` of the git checkout at ``root`` (default: the one holding this package). Outside a
     git checkout (an installed package): the commit pip installed it from if that was a git URL, ``dirty`` None;
     both None otherwise, or when git cannot be run."""
-    unknown = {"commit": None, "dirty": None}
-    if not os.path.exists(os.path.join(_ROOT if root is None else root, ".git")):  # a directory, or a worktree's file
-        return {"commit": _installed_commit(), "dirty": None} if root is None else unknown
-    root = _ROOT if root is None else root
+    own = root is None
+    root = _ROOT if own else root
+    if not os.path.exists(os.path.join(root, ".git")):  # a directory, or a worktree's file
+        return {"commit": _installed_commit() if own else None, "dirty": None}
     try:
         commit = _git(root, "rev-parse", "HEAD")
         dirty = bool(_git(root, "status", "--porcelain", "--untracked-files=no"))
     except (OSError, subprocess.SubprocessError):
-        return unknown
+        return {"commit": None, "dirty": None}
     return {"commit": commit, "dirty": dirty}
 
 
