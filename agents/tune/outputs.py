@@ -54,7 +54,8 @@ def trials_table(out: str) -> list[dict]:
     when the study was interrupted or killed), ``env_steps`` reached, the last ``score``, ``seconds``, the trial's
     directory and its searched values. Read from the study's trial log and each trial's ``result.json`` (JSON
     only: Tune's pickled experiment state is never read); a trial superseded by a resume (it was unfinished and
-    ran again as a new trial) is left out."""
+    ran again as a new trial) is left out. ``trial`` numbers the rows, so leaving a superseded trial out moves the
+    trials after it up by one; ``trial_id`` never changes."""
     spec = stored_spec(out)
     exp = os.path.realpath(os.path.join(out, EXPERIMENT))
     trials, order = {}, []
