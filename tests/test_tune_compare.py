@@ -13,7 +13,7 @@ pytest.importorskip("jax")
 from agents.training.recipes import resolve_recipe  # noqa: E402
 from agents.training.seeds import TUNING  # noqa: E402
 from agents.tune import sweep  # noqa: E402
-from agents.tune.compare import _p_better, candidate_recipe, compare_recipes, main  # noqa: E402
+from agents.tune.compare import _as_json, _p_better, candidate_recipe, compare_recipes, main  # noqa: E402
 
 TINY = {"n_envs": 2, "n_steps": 16, "batch_size": 32, "n_epochs": 1}
 
@@ -95,6 +95,50 @@ def test_a_tiny_comparison_writes_its_record(tmp_path):
     assert json.loads((out / "compare.json").read_text()) == doc2
 
 
+def test_a_comparison_in_parts_joins_into_the_record_one_process_gives(tmp_path):
+    """--part trains one candidate per process (a record without statistics); --join takes the parts in: the same
+    scores, statistics and winner as the two candidates trained in one call; the parts must be the same comparison,
+    and a name keeps its recipe across them."""
+    a = _recipe_file(tmp_path / "a.yml", learning_rate=1e-3)
+    b = _recipe_file(tmp_path / "b.yml", learning_rate=1e-4)
+    kw = dict(timesteps=64, seeds=[100, 101], episodes=1, log=lambda *_: None)
+    sweep._COMPILED.clear()
+    one = compare_recipes("tracking", {"a": a, "b": b}, out=str(tmp_path / "one"), **kw)
+    for name, f in (("a", a), ("b", b)):
+        rec = compare_recipes("tracking", {name: f}, out=str(tmp_path / name), part=True, **kw)
+        assert rec["status"] == "part" and "p_improvement" not in rec and "winner" not in rec
+        assert json.loads((tmp_path / name / "compare.json").read_text())["status"] == "part"
+    joined = compare_recipes("tracking", {}, out=str(tmp_path / "joined"), join=[str(tmp_path / "a"),
+                                                                                  str(tmp_path / "b")], **kw)
+    doc = json.loads((tmp_path / "joined" / "compare.json").read_text())
+    assert doc["status"] == "complete" and list(doc["candidates"]) == ["a", "b"]
+    for name in "ab":
+        assert doc["candidates"][name]["joined_from"] == str(tmp_path / name)
+        assert doc["candidates"][name]["seed_scores"] == one["candidates"][name]["seed_scores"]
+        assert doc["candidates"][name]["recipe"] == _as_json(one["candidates"][name]["recipe"])
+    assert doc["p_improvement"] == one["p_improvement"] and doc["winner"] == one["winner"] == joined["winner"]
+    # a part may also be joined by a process that trains another candidate itself (b2: b's recipe, new name)
+    more = compare_recipes("tracking", {"b2": b}, out=str(tmp_path / "more"), join=[str(tmp_path / "a")], **kw)
+    assert list(more["candidates"]) == ["a", "b2"]
+    assert more["candidates"]["b2"]["seed_scores"] == one["candidates"]["b"]["seed_scores"]
+    # the parts must be the same comparison; a name keeps its recipe; the output is never one of the parts
+    compare_recipes("tracking", {"a": b}, out=str(tmp_path / "a_other"), part=True, **kw)
+    with pytest.raises(ValueError, match="another recipe than the candidate of that name"):
+        compare_recipes("tracking", {}, out=str(tmp_path / "x"), join=[str(tmp_path / "a"), str(tmp_path / "a_other")],
+                        **kw)
+    with pytest.raises(ValueError, match="another recipe under that name"):
+        compare_recipes("tracking", {"a": b}, out=str(tmp_path / "x"), join=[str(tmp_path / "a")], **kw)
+    with pytest.raises(ValueError, match="another comparison: its seeds is"):
+        compare_recipes("tracking", {}, out=str(tmp_path / "x"), join=[str(tmp_path / "a"), str(tmp_path / "b")],
+                        **{**kw, "seeds": [100, 102]})
+    with pytest.raises(ValueError, match="that is --out"):
+        compare_recipes("tracking", {}, out=str(tmp_path / "a"), join=[str(tmp_path / "a"), str(tmp_path / "b")],
+                        resume=True, **kw)
+    with pytest.raises(ValueError, match="at least two candidates"):  # one part alone compares nothing
+        compare_recipes("tracking", {}, out=str(tmp_path / "x"), join=[str(tmp_path / "a")], **kw)
+    assert not (tmp_path / "x").exists()
+
+
 def test_off_policy_candidates_are_their_algorithms_recipes(tmp_path):
     """--algo sac: ``sb3`` is sac.yaml's recipe as SBX trains it, ``jax`` the same with the jitted trainer's section
     (tracking's minibatch of 128; none on disturbance_rejection), a file's section is merged over the jitted
@@ -139,6 +183,10 @@ def test_a_tiny_sac_comparison_trains_vmapped_seeds_and_scores_them(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["--candidate", "a=sb3"], "at least two candidates"),
+    (["--part"], "give the candidate(s) this process trains"),
+    (["--candidate", "a=sb3", "--part", "--join", "x"], "give one"),
+    (["--join", "/no/such/dir"], "no comparison record in /no/such/dir"),
+    (["--join", "x", "--join", "x"], "a directory given twice"),
     (["--candidate", "a", "--candidate", "b=jax"], "expected NAME=SOURCE"),
     (["--candidate", "a=sb3", "--candidate", "a=jax"], "given twice"),
     (["--candidate", "a=sb3", "--candidate", "b=/no/such.yml"], "does not exist"),

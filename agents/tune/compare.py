@@ -41,6 +41,17 @@ candidate of the file is kept, and the probabilities of improvement and the winn
 trainers are deterministic for a given seed, recipe and code, so the scores are those a new run would give
 while the code is unchanged (the file does not record the code's revision: resume from a record of the same
 checkout).
+
+``--part`` and ``--join DIR``: one comparison run in several processes (one per core), each training some of the
+candidates: ``--part`` lets a process train a single candidate (its record has ``"status": "part"`` and no
+statistics); ``--join DIR`` (repeatable) takes every candidate of the record in ``DIR``, which must be the same
+comparison (as for ``--resume``), marked ``"joined_from": DIR``, and the statistics are over all of them:
+
+    python -m agents.tune.compare --algo sac --env hetero_mas --candidate recipe=jax --part --out runs/cmp_a &
+    python -m agents.tune.compare --algo sac --env hetero_mas --candidate b128=b128.yml --part --out runs/cmp_b
+    python -m agents.tune.compare --algo sac --env hetero_mas --join runs/cmp_a --join runs/cmp_b --out runs/cmp
+
+A name in two records must name the same recipe (the first record's entry is kept).
 """
 from __future__ import annotations
 
@@ -127,27 +138,31 @@ def _as_json(x):
     return json.loads(json.dumps(x))
 
 
-def _resumed_record(path: str, record: dict, recipes: dict) -> dict:
+def _resumed_record(path: str, record: dict, recipes: dict, flag: str = "--resume") -> dict:
     """The record at ``path`` checked to be the comparison ``record`` describes (:func:`compare_recipes`'s
-    ``resume``), with its candidates; a candidate of ``recipes`` stored under its name with another recipe is an
-    error."""
+    ``resume``, or ``join``: ``flag`` names the option in the errors), with its candidates; a candidate of
+    ``recipes`` stored under its name with another recipe is an error."""
     import json
 
     try:
         with open(path) as fh:
             old = json.load(fh)
     except (OSError, ValueError) as exc:
-        raise ValueError(f"--resume: cannot read {path}: {exc}") from None
-    if not isinstance(old, dict) or not isinstance(old.get("candidates"), dict):
-        raise ValueError(f"--resume: {path} is not a comparison record (no 'candidates')")
+        raise ValueError(f"{flag}: cannot read {path}: {exc}") from None
+    if not isinstance(old, dict) or not isinstance(old.get("candidates"), dict) or not all(
+            isinstance(c, dict) for c in old["candidates"].values()):
+        raise ValueError(f"{flag}: {path} is not a comparison record (no 'candidates')")
     for key in ("env", "algo", "multi_agent", "timesteps", "seeds", "episode_seeds"):
         if old.get(key) != record[key]:
-            raise ValueError(f"--resume: {path} is another comparison: its {key} is {old.get(key)!r}, this one's "
+            raise ValueError(f"{flag}: {path} is another comparison: its {key} is {old.get(key)!r}, this one's "
                              f"{record[key]!r}")
-    stored = np.asarray(old.get("paper_cost", []), dtype=float)
+    try:
+        stored = np.asarray(old.get("paper_cost", []), dtype=float)
+    except (TypeError, ValueError):
+        stored = np.zeros(0)
     if stored.shape != np.shape(record["paper_cost"]) or not np.allclose(stored, record["paper_cost"], rtol=1e-9,
                                                                          atol=0.0):
-        raise ValueError(f"--resume: the paper's costs on the tuning episodes differ from those of {path}: the "
+        raise ValueError(f"{flag}: the paper's costs on the tuning episodes differ from those of {path}: the "
                          "environments changed since, so its scores do not compare with new ones")
     for name, hp in recipes.items():
         prev = old["candidates"].get(name)
@@ -157,14 +172,35 @@ def _resumed_record(path: str, record: dict, recipes: dict) -> dict:
     return old
 
 
+def _join(record: dict, recipes: dict, join, log) -> None:
+    """Adds to ``record["candidates"]`` every candidate of the comparison records in the directories ``join``
+    (checked as a resumed record is), each marked ``"joined_from"``; a name already held keeps its entry and must
+    name the same recipe."""
+    for d in join:
+        old = _resumed_record(os.path.join(d, "compare.json"), record, recipes, flag="--join")
+        for name, c in old["candidates"].items():
+            held = record["candidates"].get(name)
+            if held is not None:
+                if _as_json(held.get("recipe")) != _as_json(c.get("recipe")):
+                    raise ValueError(f"--join: candidate {name!r} of {d} has another recipe than the candidate "
+                                     "of that name already held; rename one")
+                continue
+            if not isinstance(c.get("seed_scores"), list) or len(c["seed_scores"]) != len(record["seeds"]):
+                raise ValueError(f"--join: candidate {name!r} of {d} has no score for each of the "
+                                 f"{len(record['seeds'])} training seeds")
+            record["candidates"][name] = {**{k: v for k, v in c.items() if k != "resumed"}, "joined_from": str(d)}
+            log(f"candidate {name}: joined from {d}")
+
+
 def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int, seeds, episodes: int, out: str,
                     dtype: str = "float32", overwrite: bool = False, resume: bool = False, multi_agent: bool = False,
-                    algo: str = "ppo", log=print) -> dict:
+                    algo: str = "ppo", part: bool = False, join=(), log=print) -> dict:
     """Train and score every candidate (``name -> source``, module doc) of ``algo`` on ``seeds`` and the first
     ``episodes`` tuning episodes; writes ``out/compare.json`` after each candidate (an interrupted comparison keeps
     the finished ones) and returns the record. ``multi_agent``: the shared-policy PPO (as :mod:`agents.tune.sweep`'s).
     ``dtype`` is PPO's (an off-policy recipe's run takes the recipe's). ``resume``: go on with ``out/compare.json``
-    (module doc)."""
+    (module doc). ``part``: one process's share of a comparison (one candidate is enough; no statistics); ``join``:
+    directories whose comparison records' candidates are taken in (module doc)."""
     from ..training.curves import paper_costs
     from .sweep import _run_structure, _write_json
 
@@ -179,23 +215,40 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
     if os.path.exists(path) and not (overwrite or resume):
         raise FileExistsError(f"{path} exists (a finished or interrupted comparison): choose another --out, pass "
                               "--resume to go on with it or --overwrite to replace it")
-    if len(candidates) < (1 if resume else 2):
-        raise ValueError(f"--candidate: give at least two candidates to compare, got {len(candidates)}")
+    join = [str(d) for d in join]
+    if part and join:
+        raise ValueError("--part and --join: give one (train a share of a comparison, or join the shares)")
+    if len(set(join)) < len(join):
+        raise ValueError("--join: a directory given twice")
+    for d in join:
+        if os.path.realpath(d) == os.path.realpath(out):
+            raise ValueError(f"--join {d}: that is --out (to go on with the comparison in --out, pass --resume)")
+        if not os.path.exists(os.path.join(d, "compare.json")):
+            raise FileNotFoundError(f"--join: no comparison record in {d} ({os.path.join(d, 'compare.json')} does "
+                                    "not exist)")
+    if part and not candidates:
+        raise ValueError("--part: give the candidate(s) this process trains")
+    if not (resume or join or part) and len(candidates) < 2:
+        raise ValueError(f"--candidate: give at least two candidates to compare, got {len(candidates)} (to train "
+                         "one in each of several processes: --part, then --join)")
     # errors before training
     recipes = {name: candidate_recipe(src, env_name, multi_agent, algo) for name, src in candidates.items()}
-    os.makedirs(out, exist_ok=True)
     paper = paper_costs(env_name, {}, episode_seeds)
     record = {"env": env_name, "algo": algo, "trainer": "jax", "multi_agent": bool(multi_agent),
               "timesteps": int(timesteps), "seeds": seeds,
               "episode_seeds": episode_seeds, "paper_cost": paper.tolist(), "candidates": {}, "status": "running"}
     if resume:
         record["candidates"] = _resumed_record(path, record, recipes)["candidates"]
-        if len(set(record["candidates"]) | set(recipes)) < 2:
-            raise ValueError("--candidate: give at least two candidates to compare (with those of the record)")
+    _join(record, recipes, join, log)
+    if not part and len(set(record["candidates"]) | set(recipes)) < 2:
+        raise ValueError("--candidate: give at least two candidates to compare (with those of the records)")
+    os.makedirs(out, exist_ok=True)
     for name, hp in recipes.items():
         if name in record["candidates"]:
-            record["candidates"][name]["resumed"] = True
-            log(f"candidate {name}: kept from {path} (same recipe, seeds and episodes)")
+            held = record["candidates"][name]
+            if "joined_from" not in held:
+                held["resumed"] = True
+            log(f"candidate {name}: kept from {held.get('joined_from', path)} (same recipe, seeds and episodes)")
             continue
         log(f"candidate {name} ({candidates[name]}): {len(seeds)} seeds")
         if algo == "ppo":
@@ -211,6 +264,11 @@ def compare_recipes(env_name: str, candidates: dict[str, str], *, timesteps: int
             "iqm": float(iqm(s)) if finite.size == s.size else math.inf}
         log(f"  mean {np.mean(s):.4g}, median {np.median(s):.4g}, {times['cpu_seconds']:.0f} CPU s of training")
         _write_json(path, record)
+    if part:
+        record["status"] = "part"
+        _write_json(path, record)
+        log(f"{path}: a part of a comparison (no statistics); join it with --join {out}")
+        return record
     names = list(record["candidates"])
     sc = {n: np.asarray([math.inf if v is None else v for v in record["candidates"][n]["seed_scores"]], dtype=float)
           for n in names}
@@ -227,7 +285,8 @@ def main(argv=None) -> int:
     ap.add_argument("--env", default="tracking")
     ap.add_argument("--algo", default="ppo", choices=ALGOS, help="the jitted trainer's algorithm (default ppo)")
     ap.add_argument("--candidate", action="append", default=[], metavar="NAME=SOURCE",
-                    help="sb3, jax or a recipe file (module doc); repeat, at least two")
+                    help="sb3, jax or a recipe file (module doc); repeat, at least two (with those of --resume, "
+                    "--join)")
     ap.add_argument("--timesteps", type=int, default=600_000)
     ap.add_argument("--first-seed", type=int, default=100, help="training seeds first .. first + N - 1 (the "
                     "benchmark trains seeds 0-9, a sweep 0 .. its --seeds - 1)")
@@ -238,6 +297,10 @@ def main(argv=None) -> int:
     ap.add_argument("--resume", action="store_true", help="go on with the comparison in --out: train only the "
                     "candidates it does not hold (module doc)")
     ap.add_argument("--multi-agent", action="store_true", help="the shared-policy PPO's recipes")
+    ap.add_argument("--part", action="store_true", help="train this process's share of a comparison run in "
+                    "several processes (one candidate is enough; no statistics): join the shares with --join")
+    ap.add_argument("--join", action="append", default=[], metavar="DIR", help="take in the candidates of the "
+                    "comparison record in DIR (the same comparison); repeat")
     args = ap.parse_args(argv)
     from ..training.xla import xla_threads
 
@@ -258,7 +321,7 @@ def main(argv=None) -> int:
         compare_recipes(args.env, candidates, timesteps=args.timesteps,
                         seeds=range(args.first_seed, args.first_seed + args.seeds), episodes=args.episodes,
                         out=args.out, overwrite=args.overwrite, resume=args.resume, multi_agent=args.multi_agent,
-                        algo=args.algo)
+                        algo=args.algo, part=args.part, join=args.join)
     except (ValueError, FileExistsError, FileNotFoundError, HyperparamsError) as exc:
         ap.error(str(exc))
     return 0
