@@ -53,13 +53,12 @@ ARCHIVES = {
                                         {"hetero_mas": ("docs/results/full_hetero_mas.md",
                                                         "## The jitted agents (full budget, hetero_mas)")},
                                         ["ppo_jax", "ppo_ma_jax", "ppo_sqrt_jax", "sac_jax"]),
-    # the six PPO-family agents with SB3's recipes, 10 runs each (the off-policy agents not trained on these envs;
-    # random_network: + SBX SAC, 10 runs)
-    "disturbance_rejection_full_runs.tar.gz": ("disturbance_rejection", "full", 60,
+    # the six PPO-family agents with SB3's recipes and SBX SAC, 10 runs each (TD3 and CrossQ not trained on these envs)
+    "disturbance_rejection_full_runs.tar.gz": ("disturbance_rejection", "full", 70,
                                                {"disturbance_rejection": (
                                                    "docs/results/full_disturbance_rejection.md",
                                                    "## RL versus the paper's controller (full budget, disturbance_rejection)")},
-                                               ["ppo", "ppo_ma", "ppo_sqrt", "ppo_res", "ppo_res_ma", "ppo_bc"]),
+                                               ["ppo", "ppo_ma", "ppo_sqrt", "ppo_res", "ppo_res_ma", "ppo_bc", "sac"]),
     "random_network_full_runs.tar.gz": ("random_network", "full", 70,
                                         {"random_network": ("docs/results/full_random_network.md",
                                                             "## RL versus the paper's controller (full budget, random_network)")},
